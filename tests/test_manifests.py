@@ -1,0 +1,34 @@
+"""Dataset manifests name real converters, and their layouts match the shared copies."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+from conftest import SHARED_DATA
+from typer.testing import CliRunner
+
+from wristmimic.cli.main import app
+
+MANIFESTS = sorted((Path(__file__).resolve().parents[1] / "datasets").glob("*.toml"))
+
+
+def test_there_is_a_manifest_per_converter() -> None:
+    converters = {tomllib.loads(m.read_text())["converter"] for m in MANIFESTS}
+    assert converters == {"intermimic", "skillmimic-parahome"}
+
+
+@pytest.mark.parametrize("manifest", MANIFESTS, ids=lambda p: p.stem)
+def test_manifest_fields_and_command(manifest: Path) -> None:
+    m = tomllib.loads(manifest.read_text())
+    for key in ("name", "dataset", "source_format", "converter", "licence", "obtain", "convert", "output", "layout"):
+        assert key in m, key
+    assert m["convert"].startswith(f"wristmimic convert {m['converter']} ")
+    r = CliRunner().invoke(app, ["convert", m["converter"], "--help"])
+    assert r.exit_code == 0
+    shared = SHARED_DATA / m["shared_copy"]
+    if not shared.exists():
+        pytest.skip(f"shared data not found at {shared}")
+    for key, pattern in m["layout"].items():
+        assert list(shared.glob(pattern)), f"{manifest.name}: layout.{key} = {pattern!r} matches nothing in {shared}"

@@ -1,0 +1,121 @@
+"""``wristmimic convert <source> SRC -o OUT.h5``: source files -> one canonical HDF5 file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from wristmimic.cli.errors import user_errors
+from wristmimic.convert.common import ConvertOptions, ConvertReport
+from wristmimic.convert.hulls import HullParams
+
+app = typer.Typer(help="Convert source datasets into the canonical HDF5 reference format.", no_args_is_help=True)
+
+_OUT = typer.Option(..., "--out", "-o", help="Output .h5 file (written atomically).")
+_CACHE = typer.Option(
+    None, "--hull-cache", help="coacd cache folder [default: $WRISTMIMIC_CACHE_DIR/hulls or ~/.cache/wristmimic/hulls]."
+)
+_NOCACHE = typer.Option(False, "--no-hull-cache", help="Recompute every collision hull.")
+_SEED = typer.Option(0, "--hull-seed", help="coacd seed (recorded in the file).")
+_QUIET = typer.Option(False, "--quiet", "-q", help="No progress bars.")
+
+
+def _options(cache: Path | None, no_cache: bool, seed: int, quiet: bool) -> ConvertOptions:
+    return ConvertOptions(
+        hull_cache_dir=cache, use_hull_cache=not no_cache, hull_params=HullParams(seed=seed), show_progress=not quiet
+    )
+
+
+def _summary(r: ConvertReport) -> None:
+    hits = sum(r.hull_cache_hits.values())
+    typer.echo(
+        f"wrote {r.output}: {len(r.sequences)} sequence(s), {len(r.hull_cache_hits)} object(s) "
+        f"({hits} hull cache hit(s))"
+    )
+    for sid, why in sorted(r.skipped.items()):
+        typer.echo(f"skipped {sid}: {why}", err=True)
+
+
+@app.command("intermimic")
+def intermimic(
+    src: Path = typer.Argument(
+        ..., help="Folder with motions/*.pt, objects/ and the humanoid .xml (like ../shared/data/intermimic_omomo)."
+    ),
+    out: Path = _OUT,
+    sequence: list[str] = typer.Option(
+        None, "--sequence", "-s", help="Convert only these sequence ids (repeatable) [default: all]."
+    ),
+    humanoid: Path = typer.Option(None, "--humanoid", help="Humanoid MJCF [default: the one .xml in SRC]."),
+    object_name: str = typer.Option(
+        None, "--object", help="Object name for every sequence [default: from the name sub<N>_<object>_<NNN>]."
+    ),
+    hull_cache: Path = _CACHE,
+    no_hull_cache: bool = _NOCACHE,
+    hull_seed: int = _SEED,
+    quiet: bool = _QUIET,
+) -> None:
+    """InterMimic / InterAct OMOMO `.pt` files (T x 591, xyzw) -> canonical HDF5.
+
+    Example: wristmimic convert intermimic ../shared/data/intermimic_omomo -o datasets/omomo.h5
+    """
+    from wristmimic.convert.intermimic import convert_intermimic
+
+    with user_errors():
+        r = convert_intermimic(
+            src,
+            out,
+            sequences=sequence or None,
+            humanoid=humanoid,
+            object_name=object_name,
+            options=_options(hull_cache, no_hull_cache, hull_seed, quiet),
+        )
+    _summary(r)
+
+
+@app.command("skillmimic-parahome")
+def skillmimic_parahome(
+    src: Path = typer.Argument(
+        ...,
+        help="Folder with motions/**/NNN_sXX_<skill>[_<a>_<b>].pt, humanoids/sXX.xml "
+        "and objects/ (like ../shared/data/skillmimic_parahome).",
+    ),
+    out: Path = _OUT,
+    clip: list[str] = typer.Option(
+        None, "--clip", "-c", help="Convert only these clips (sequence id or file stem, repeatable) [default: all]."
+    ),
+    subject: str = typer.Option(
+        None, "--subject", help="Humanoid humanoids/<SUBJECT>.xml for every clip [default: sXX from the name]."
+    ),
+    objects: str = typer.Option(
+        None,
+        "--objects",
+        help="Comma-separated object names for every clip "
+        "[default: from the skill, e.g. pour_kettlecup -> kettle,cup].",
+    ),
+    skip_missing: bool = typer.Option(
+        False, "--skip-missing", help="Skip (and report) clips whose humanoid or mesh is missing instead of failing."
+    ),
+    hull_cache: Path = _CACHE,
+    no_hull_cache: bool = _NOCACHE,
+    hull_seed: int = _SEED,
+    quiet: bool = _QUIET,
+) -> None:
+    """SkillMimic(-V2) ParaHome clips (T x 409 / 415, rotation vectors) -> canonical HDF5, with contacts from
+    geometry and inferred static supports.
+
+    Example: wristmimic convert skillmimic-parahome ../shared/data/skillmimic_parahome -o datasets/parahome.h5
+    """
+    from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
+
+    with user_errors():
+        r = convert_skillmimic_parahome(
+            src,
+            out,
+            clips=clip or None,
+            subject=subject,
+            objects=[o.strip() for o in objects.split(",")] if objects else None,
+            skip_missing=skip_missing,
+            options=_options(hull_cache, no_hull_cache, hull_seed, quiet),
+        )
+    _summary(r)

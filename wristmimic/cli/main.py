@@ -1,0 +1,37 @@
+"""The ``wristmimic`` command: one Typer app, one thin module per verb."""
+
+from __future__ import annotations
+
+import typer
+
+from wristmimic import __version__
+from wristmimic.cli import convert, inspect, validate
+
+app = typer.Typer(
+    name="wristmimic",
+    help="Physics-based human-object-interaction retargeting (WristMimic) on MuJoCo.\n\n"
+    "Data flow: convert (source files -> canonical HDF5) -> scene/env -> train -> evaluate -> report / view.",
+    no_args_is_help=True,
+    pretty_exceptions_show_locals=False,
+    add_completion=False,
+)
+app.add_typer(convert.app, name="convert")
+app.command("inspect")(inspect.inspect_cmd)
+app.command("validate")(validate.validate_cmd)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"wristmimic {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version."),
+) -> None:
+    """Physics-based HOI retargeting suite."""
+
+
+if __name__ == "__main__":
+    app()

@@ -1,0 +1,280 @@
+"""InterMimic / InterAct ``.pt`` files (OMOMO) -> canonical HDF5.
+
+Source layout (like ``../shared/data/intermimic_omomo``)::
+
+    SRC/omomo.xml                      SMPL-X humanoid (52 bodies, 51 x 3 hinges), Isaac Gym MJCF
+    SRC/motions/<seq>.pt               float32 (T, 591) tensors, 30 fps, Z-up, quaternions xyzw
+    SRC/objects/<obj>.urdf             + SRC/objects/<obj>/<obj>.obj
+
+Every one of the 591 columns is mapped or verified unused (:data:`COLUMNS`). Joint rotations are derived
+from the global body quaternions (cols 383:591) as ``parent^-1 * child`` and decomposed into intrinsic XYZ
+Euler angles for the x, y, z hinges, so that MuJoCo FK of the embedded humanoid reproduces the stored body
+rotations exactly (the stored exp-maps, cols 9:162, equal these local rotations and are checked, but fed
+straight to hinges they are 5-7 cm off at the wrists). Finger slots of the stored positions (cols 162:318)
+do not follow the body order, so body positions come from FK; the source positions are kept with a
+validity mask (non-finger slots).
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wristmimic.convert.common import (
+    ConvertOptions,
+    ConvertReport,
+    contact_summary,
+    geometric_contacts,
+    humanoid_record,
+    kinematics,
+    object_record,
+)
+from wristmimic.convert.contacts import label_agreement
+from wristmimic.convert.objects import load_object
+from wristmimic.convert.progress import progress_bar
+from wristmimic.errors import InputError
+from wristmimic.format.records import SequenceRecord
+from wristmimic.format.writer import DatasetWriter
+from wristmimic.humanoid.kinematics import local_from_global
+from wristmimic.rotations import quat_angle, quat_normalize, rotvec_to_quat, xyzw_to_wxyz
+from wristmimic.safe_io import load_pt_tensor, sha256_file
+
+NUM_COLUMNS = 591
+NUM_BODIES = 52
+COLUMNS: dict[str, tuple[int, int, str]] = {
+    "root_pos": (0, 3, "root (pelvis) position, world, m -> root_pos; equals cols 162:165"),
+    "root_quat": (3, 7, "root quaternion xyzw -> root_quat (wxyz); equals cols 383:387"),
+    "unused_7_9": (7, 9, "unused: verified all zero"),
+    "dof_expmap": (9, 162, "51 x 3 exp-maps of the local joint rotations: verified equal to the derived joint_quat"),
+    "body_pos": (162, 318, "52 x 3 body positions -> source_body_pos (finger slots unreliable: mask false)"),
+    "object_pos": (318, 321, "object position -> object_pos"),
+    "object_quat": (321, 325, "object quaternion xyzw -> object_quat (wxyz)"),
+    "unused_325_330": (325, 330, "unused: verified all zero"),
+    "object_contact": (330, 331, "object-level contact flag {0,1} -> contacts/object"),
+    "body_contact": (331, 383, "52 per-body labels {-1,0,1} -> contacts/labels"),
+    "body_quat": (383, 591, "52 x 4 global body quaternions xyzw -> body_quat (wxyz)"),
+}
+EXPMAP_TOL_DEG = 0.5
+_SEQ_RE = re.compile(r"^(?P<subject>sub\d+)_(?P<object>[a-z]+)_(?P<num>\d+)$")
+
+
+@dataclass
+class IntermimicSource:
+    """Where the pieces of an InterMimic-layout folder are."""
+
+    root: Path
+    humanoid: Path
+    motions: list[Path]
+    objects_dir: Path
+
+
+def discover(src: Path, humanoid: Path | None = None, sequences: list[str] | None = None) -> IntermimicSource:
+    """Find the humanoid, motion files and objects folder of an InterMimic-layout folder."""
+    src = Path(src)
+    if not src.is_dir():
+        raise InputError(src, None, "not a folder", "a folder with motions/, objects/ and a humanoid .xml")
+    if humanoid is None:
+        xmls = sorted(src.glob("*.xml"))
+        if len(xmls) != 1:
+            raise InputError(src, "*.xml", f"found {len(xmls)} humanoid MJCF files", "exactly one (or --humanoid)")
+        humanoid = xmls[0]
+    if not Path(humanoid).is_file():
+        raise InputError(humanoid, None, "humanoid MJCF not found")
+    motions = sorted((src / "motions").glob("*.pt"))
+    if not motions:
+        raise InputError(src / "motions", "*.pt", "no motion files", "InterMimic (T, 591) .pt tensors")
+    if sequences:
+        by_stem = {m.stem: m for m in motions}
+        missing = [s for s in sequences if s not in by_stem]
+        if missing:
+            raise InputError(src / "motions", missing[0], "no such sequence", f"one of {sorted(by_stem)[:6]}...")
+        motions = [by_stem[s] for s in sequences]
+    objects_dir = src / "objects"
+    if not objects_dir.is_dir():
+        raise InputError(objects_dir, None, "objects folder missing", "objects/<name>.urdf and meshes")
+    return IntermimicSource(src, Path(humanoid), motions, objects_dir)
+
+
+def parse_sequence_name(stem: str) -> tuple[str, str]:
+    """``sub2_largetable_000`` -> (subject ``sub2``, object ``largetable``)."""
+    m = _SEQ_RE.match(stem)
+    if not m:
+        raise InputError(
+            stem + ".pt",
+            "file name",
+            "cannot read subject and object from the name",
+            "sub<N>_<object>_<NNN>.pt (or pass --object)",
+        )
+    return m["subject"], m["object"]
+
+
+def read_motion(path: Path) -> np.ndarray:
+    """Load and check one (T, 591) InterMimic motion tensor (float64)."""
+    data = load_pt_tensor(path)
+    if data.shape[1] != NUM_COLUMNS or data.shape[0] < 2:
+        raise InputError(path, "<tensor>", f"shape {data.shape}", f"(T >= 2, {NUM_COLUMNS}) InterMimic columns")
+    for name in ("unused_7_9", "unused_325_330"):
+        a, b, _ = COLUMNS[name]
+        if np.any(data[:, a:b] != 0):
+            raise InputError(
+                path,
+                f"columns {a}:{b}",
+                "non-zero values in columns InterMimic leaves unused",
+                "zeros (is this an InterMimic OMOMO file?)",
+            )
+    lab = data[:, 331:383]
+    if not np.isin(lab, (-1.0, 0.0, 1.0)).all():
+        raise InputError(path, "columns 331:383", "contact labels outside {-1, 0, 1}", "{-1, 0, 1}")
+    if not np.isin(data[:, 330], (0.0, 1.0)).all():
+        raise InputError(path, "column 330", "object contact flag outside {0, 1}", "{0, 1}")
+    for a, b, key in ((3, 7, "columns 3:7"), (321, 325, "columns 321:325")):
+        n = np.linalg.norm(data[:, a:b], axis=-1)
+        if np.any(np.abs(n - 1) > 1e-3):
+            raise InputError(path, key, f"quaternion norm {n.min():.3f}..{n.max():.3f}", "unit quaternions")
+    return data
+
+
+def convert_intermimic(
+    src: str | Path,
+    out: str | Path,
+    *,
+    sequences: list[str] | None = None,
+    humanoid: str | Path | None = None,
+    object_name: str | None = None,
+    options: ConvertOptions | None = None,
+) -> ConvertReport:
+    """Convert an InterMimic-layout folder into one canonical file at ``out`` (atomic)."""
+    opts = options or ConvertOptions()
+    source = discover(Path(src), Path(humanoid) if humanoid else None, sequences)
+    report = ConvertReport(Path(out))
+    mjcf = source.humanoid.read_text()
+    hid = source.humanoid.stem
+    hrec, skel = humanoid_record(mjcf, hid, source.humanoid.name)
+    if skel.num_bodies != NUM_BODIES:
+        raise InputError(source.humanoid, "bodies", f"{skel.num_bodies} bodies", f"{NUM_BODIES} (SMPL-X)")
+    roles = hrec.roles
+    valid = np.ones(NUM_BODIES, bool)
+    valid[roles["fingers"]] = False
+
+    # read every motion first: bad input fails before any expensive work
+    motions = {p.stem: read_motion(p) for p in source.motions}
+    obj_names = {s: object_name or parse_sequence_name(s)[1] for s in motions}
+    inputs = {str(p.relative_to(source.root)): sha256_file(p) for p in [source.humanoid, *source.motions]}
+
+    with (
+        DatasetWriter(
+            out, source_dataset="omomo", source_format="intermimic-pt", converter="intermimic", input_sha256=inputs
+        ) as w,
+        progress_bar(opts.show_progress) as bar,
+    ):
+        w.add_humanoid(hid, hrec)
+        assets = {}
+        task = bar.add_task("objects (coacd hulls)", total=len(set(obj_names.values())))
+        for name in sorted(set(obj_names.values())):
+            t0 = time.perf_counter()
+            asset = load_object(
+                name,
+                source.objects_dir,
+                density=opts.object_density,
+                n_surface=opts.surface_points,
+                surface_seed=opts.surface_seed,
+            )
+            rec, _, hit = object_record(asset, opts, static=False)  # the manipulated object moves
+            w.add_object(name, rec)
+            assets[name] = asset
+            report.seconds_per_object[name] = time.perf_counter() - t0
+            report.hull_cache_hits[name] = hit
+            if asset.urdf_path is not None:
+                inputs[str(asset.urdf_path.relative_to(source.root))] = sha256_file(asset.urdf_path)
+            inputs[str(asset.mesh_path.relative_to(source.root))] = asset.mesh_sha256
+            bar.advance(task)
+        task = bar.add_task("sequences", total=len(motions))
+        for sid, data in motions.items():
+            t0 = time.perf_counter()
+            rec = _sequence(
+                sid,
+                data,
+                source.motions[list(motions).index(sid)],
+                skel,
+                roles,
+                valid,
+                assets[obj_names[sid]],
+                hid,
+                opts,
+            )
+            w.add_sequence(sid, rec)
+            report.sequences.append(sid)
+            report.seconds_per_sequence[sid] = time.perf_counter() - t0
+            report.fk_rotation_error_deg[sid] = rec.extra["fk_rotation_error_deg"]
+            bar.advance(task)
+        w.file.attrs["input_sha256"] = __import__("json").dumps(inputs, sort_keys=True)
+    return report
+
+
+def _sequence(
+    sid: str, data: np.ndarray, path: Path, skel, roles, valid: np.ndarray, asset, hid: str, opts: ConvertOptions
+) -> SequenceRecord:
+    T = data.shape[0]
+    body_quat = quat_normalize(xyzw_to_wxyz(data[:, 383:591].reshape(T, NUM_BODIES, 4)))
+    root_pos = data[:, 0:3]
+    root_quat = quat_normalize(xyzw_to_wxyz(data[:, 3:7]))
+    if np.degrees(quat_angle(root_quat, body_quat[:, 0])).max() > EXPMAP_TOL_DEG:
+        raise InputError(path, "columns 3:7", "root quaternion differs from body 0 quaternion (cols 383:387)")
+    joint_quat = local_from_global(skel, body_quat)
+    expmap_err = float(np.degrees(quat_angle(joint_quat, rotvec_to_quat(data[:, 9:162].reshape(T, 51, 3)))).max())
+    if expmap_err > EXPMAP_TOL_DEG:
+        raise InputError(
+            path,
+            "columns 9:162",
+            f"exp-maps are {expmap_err:.2f} deg off the rotations in 383:591",
+            "the local rotations of the stored body quaternions",
+        )
+    kin = kinematics(skel, root_pos, root_quat, joint_quat, body_quat, str(path))
+    obj_pos = data[:, None, 318:321]
+    obj_quat = quat_normalize(xyzw_to_wxyz(data[:, None, 321:325]))
+    dist, geo = geometric_contacts(
+        skel, roles, kin.qpos, [(asset.vertices, asset.faces)], obj_pos, obj_quat, opts.contact
+    )
+    shipped = data[:, 331:383].astype(np.int8)
+    summ = contact_summary(shipped, roles, opts.contact)
+    subject = _SEQ_RE.match(sid)["subject"] if _SEQ_RE.match(sid) else ""
+    agree = label_agreement(geo, shipped)
+    agree_hands = label_agreement(geo, shipped, np.concatenate([roles["left_hand"], roles["right_hand"]]))
+    return SequenceRecord(
+        humanoid_id=hid,
+        object_ids=[asset.name],
+        subject=subject,
+        dataset="omomo",
+        root_pos=root_pos,
+        root_quat=root_quat,
+        joint_quat=joint_quat,
+        joint_angles=kin.joint_angles,
+        body_pos=kin.body_pos,
+        body_quat=body_quat,
+        source_body_pos=data[:, 162:318].reshape(T, NUM_BODIES, 3),
+        source_body_pos_valid=valid,
+        object_pos=obj_pos,
+        object_quat=obj_quat,
+        contact_labels=shipped,
+        contact_geometric=geo,
+        contact_distance=dist,
+        hand_contact=summ["hand"],
+        object_contact=data[:, 330] > 0.5,
+        first_contact_frame=summ["first"],
+        contact_window=summ["window"],
+        contact_meta={
+            "labels_method": "source:intermimic (InterAct SMPL-X surface recipe)",
+            "geometric_method": "humanoid geom surface points vs object surface samples (KD-tree)",
+            "params": opts.contact.to_dict(),
+            "t_b": opts.contact.t_b,
+            "t_a": opts.contact.t_a,
+            "agreement_geometric_vs_labels": agree,
+            "agreement_hands": agree_hands,
+        },
+        source_file=str(path.name),
+        extra={"fk_rotation_error_deg": kin.fk_rotation_error_deg, "expmap_vs_joint_quat_deg": expmap_err},
+    )
