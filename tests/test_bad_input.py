@@ -8,12 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from synthetic import intermimic_motion, save_pt, write_intermimic_folder, write_parahome_folder
 from typer.testing import CliRunner
 
 from wristmimic.cli.main import app
 from wristmimic.errors import InputError
 from wristmimic.safe_io import load_pt_tensor
+
+from synthetic import intermimic_motion, save_pt, write_intermimic_folder, write_parahome_folder
 
 runner = CliRunner()
 

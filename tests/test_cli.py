@@ -5,10 +5,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from synthetic import write_intermimic_folder, write_parahome_folder
 from typer.testing import CliRunner
 
 from wristmimic.cli.main import app
+
+from synthetic import write_intermimic_folder, write_parahome_folder
 
 runner = CliRunner()
 

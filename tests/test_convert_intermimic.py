@@ -6,8 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import shared_path
-from synthetic import intermimic_motion, save_pt, write_intermimic_folder
 
 from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.intermimic import COLUMNS, NUM_COLUMNS, convert_intermimic
@@ -17,6 +15,9 @@ from wristmimic.humanoid.kinematics import forward_kinematics, qpos_from
 from wristmimic.humanoid.skeleton import load_skeleton
 from wristmimic.rotations import quat_angle, xyzw_to_wxyz
 from wristmimic.safe_io import load_pt_tensor
+
+from conftest import shared_path
+from synthetic import intermimic_motion, save_pt, write_intermimic_folder
 
 
 def test_every_column_is_mapped_once() -> None:
@@ -130,3 +131,18 @@ def test_extra_motion_file_with_other_object_name_needs_that_object(tmp_path: Pa
     with pytest.raises(InputError, match="chair"):
         _convert(src, tmp_path / "o.h5", tmp_path / "c")
     assert not (tmp_path / "o.h5").exists()
+
+
+@pytest.mark.shared_data
+def test_shared_sequence_converted_again_is_identical_and_hits_the_hull_cache(omomo_h5: Path, tmp_path: Path) -> None:
+    src = shared_path("intermimic_omomo")
+    r = convert_intermimic(
+        src, tmp_path / "again.h5", sequences=["sub2_largetable_000"], options=ConvertOptions(show_progress=False)
+    )
+    assert r.hull_cache_hits == {"largetable": True}
+    assert r.seconds_per_object["largetable"] < 10  # no decomposition
+    with open_dataset(omomo_h5) as a, open_dataset(tmp_path / "again.h5") as b:
+        ra, rb = a.sequence("sub2_largetable_000").load(), b.sequence("sub2_largetable_000").load()
+        for k, v in ra.arrays().items():
+            assert np.array_equal(v, rb.arrays()[k]), k
+        assert np.array_equal(a.object("largetable").hull_vertices, b.object("largetable").hull_vertices)

@@ -6,8 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import shared_path
-from synthetic import parahome_motion, write_parahome_folder
 
 from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.skillmimic_parahome import (
@@ -23,6 +21,9 @@ from wristmimic.humanoid.kinematics import forward_kinematics, qpos_from
 from wristmimic.humanoid.skeleton import load_skeleton
 from wristmimic.rotations import quat_angle, rotvec_to_quat
 from wristmimic.safe_io import load_pt_tensor
+
+from conftest import shared_path
+from synthetic import parahome_motion, write_parahome_folder
 
 
 @pytest.mark.parametrize("n,width", [(1, 409), (2, 415)])

@@ -7,13 +7,14 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from synthetic import write_intermimic_folder
 
 from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.intermimic import convert_intermimic
 from wristmimic.errors import InputError, SchemaVersionError
 from wristmimic.format import SCHEMA_VERSION, DatasetWriter, open_dataset
 from wristmimic.format.validate import validate
+
+from synthetic import write_intermimic_folder
 
 
 @pytest.fixture(scope="module")

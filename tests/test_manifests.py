@@ -6,10 +6,11 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from conftest import SHARED_DATA
 from typer.testing import CliRunner
 
 from wristmimic.cli.main import app
+
+from conftest import SHARED_DATA
 
 MANIFESTS = sorted((Path(__file__).resolve().parents[1] / "datasets").glob("*.toml"))
 
