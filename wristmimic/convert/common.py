@@ -110,6 +110,47 @@ def object_record(
     return rec, hs.seconds, hs.cache_hit
 
 
+def write_objects(
+    writer: Any,
+    names: Sequence[str],
+    objects_dir: Path,
+    source_root: Path,
+    opts: ConvertOptions,
+    report: ConvertReport,
+    inputs: dict[str, str],
+    bar: Any,
+    *,
+    static: bool | None = None,
+) -> dict[str, ObjectAsset]:
+    """Load each object (URDF + OBJ), decompose it (cached), write it; record timings and input hashes."""
+    import time
+
+    from wristmimic.convert.objects import load_object
+    from wristmimic.safe_io import sha256_file
+
+    assets: dict[str, ObjectAsset] = {}
+    task = bar.add_task("objects (coacd hulls)", total=len(names))
+    for name in sorted(names):
+        t0 = time.perf_counter()
+        asset = load_object(
+            name,
+            objects_dir,
+            density=opts.object_density,
+            n_surface=opts.surface_points,
+            surface_seed=opts.surface_seed,
+        )
+        rec, _, hit = object_record(asset, opts, static=static)
+        writer.add_object(name, rec)
+        assets[name] = asset
+        report.seconds_per_object[name] = time.perf_counter() - t0
+        report.hull_cache_hits[name] = hit
+        if asset.urdf_path is not None:
+            inputs[str(asset.urdf_path.relative_to(source_root))] = sha256_file(asset.urdf_path)
+        inputs[str(asset.mesh_path.relative_to(source_root))] = asset.mesh_sha256
+        bar.advance(task)
+    return assets
+
+
 @dataclass
 class Kinematics:
     """Per-frame kinematics of a converted sequence."""

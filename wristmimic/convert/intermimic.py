@@ -31,10 +31,9 @@ from wristmimic.convert.common import (
     geometric_contacts,
     humanoid_record,
     kinematics,
-    object_record,
+    write_objects,
 )
 from wristmimic.convert.contacts import label_agreement
-from wristmimic.convert.objects import load_object
 from wristmimic.convert.progress import progress_bar
 from wristmimic.errors import InputError
 from wristmimic.format.records import SequenceRecord
@@ -172,26 +171,10 @@ def convert_intermimic(
         progress_bar(opts.show_progress) as bar,
     ):
         w.add_humanoid(hid, hrec)
-        assets = {}
-        task = bar.add_task("objects (coacd hulls)", total=len(set(obj_names.values())))
-        for name in sorted(set(obj_names.values())):
-            t0 = time.perf_counter()
-            asset = load_object(
-                name,
-                source.objects_dir,
-                density=opts.object_density,
-                n_surface=opts.surface_points,
-                surface_seed=opts.surface_seed,
-            )
-            rec, _, hit = object_record(asset, opts, static=False)  # the manipulated object moves
-            w.add_object(name, rec)
-            assets[name] = asset
-            report.seconds_per_object[name] = time.perf_counter() - t0
-            report.hull_cache_hits[name] = hit
-            if asset.urdf_path is not None:
-                inputs[str(asset.urdf_path.relative_to(source.root))] = sha256_file(asset.urdf_path)
-            inputs[str(asset.mesh_path.relative_to(source.root))] = asset.mesh_sha256
-            bar.advance(task)
+        # the manipulated object moves: dynamic whatever its name
+        assets = write_objects(
+            w, sorted(set(obj_names.values())), source.objects_dir, source.root, opts, report, inputs, bar, static=False
+        )
         task = bar.add_task("sequences", total=len(motions))
         for sid, data in motions.items():
             t0 = time.perf_counter()

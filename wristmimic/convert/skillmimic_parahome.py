@@ -31,9 +31,9 @@ from wristmimic.convert.common import (
     geometric_contacts,
     humanoid_record,
     kinematics,
-    object_record,
+    write_objects,
 )
-from wristmimic.convert.objects import list_objects, load_object
+from wristmimic.convert.objects import list_objects
 from wristmimic.convert.progress import progress_bar
 from wristmimic.convert.supports import InferredSupport, SupportParams, infer_supports
 from wristmimic.errors import InputError
@@ -291,27 +291,8 @@ def convert_skillmimic_parahome(
             w.add_humanoid(subj, rec)
             humanoids[subj] = (rec, skel)
             inputs[str(p.relative_to(src))] = sha256_file(p)
-        assets = {}
         names = sorted({o for c in found for o in c.objects})
-        task = bar.add_task("objects (coacd hulls)", total=len(names))
-        for name in names:
-            t0 = time.perf_counter()
-            asset = load_object(
-                name,
-                src / "objects",
-                density=opts.object_density,
-                n_surface=opts.surface_points,
-                surface_seed=opts.surface_seed,
-            )
-            rec, _, hit = object_record(asset, opts)
-            w.add_object(name, rec)
-            assets[name] = asset
-            report.seconds_per_object[name] = time.perf_counter() - t0
-            report.hull_cache_hits[name] = hit
-            if asset.urdf_path is not None:
-                inputs[str(asset.urdf_path.relative_to(src))] = sha256_file(asset.urdf_path)
-            inputs[str(asset.mesh_path.relative_to(src))] = asset.mesh_sha256
-            bar.advance(task)
+        assets = write_objects(w, names, src / "objects", src, opts, report, inputs, bar)
         task = bar.add_task("clips", total=len(found))
         for clip in found:
             t0 = time.perf_counter()
