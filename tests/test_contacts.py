@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -13,6 +12,8 @@ import trimesh
 from wristmimic.convert import contacts as C
 from wristmimic.errors import InputError
 from wristmimic.rotations import euler_xyz_to_quat, quat_rotate
+
+from conftest import SHARED_DATA
 
 HINGES = '<joint type="hinge" axis="1 0 0"/><joint type="hinge" axis="0 1 0"/><joint type="hinge" axis="0 0 1"/>'
 ROOT_Z = 2.0  # root body's world height; children below it are placed relative to it
@@ -323,7 +324,7 @@ def test_matches_brute_force_over_the_object_points(model, monkeypatch, voxel):
 # ---------------------------------------------------------------------------------------------------------
 # real data (read from ../shared/data beside the checkout; skipped where absent)
 
-OMOMO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "intermimic_omomo"
+OMOMO = SHARED_DATA / "intermimic_omomo"
 
 
 @pytest.mark.shared_data

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +10,8 @@ import trimesh
 
 from wristmimic.convert import supports as S
 from wristmimic.rotations import euler_xyz_to_quat, quat_rotate
+
+from conftest import SHARED_DATA
 
 HALF = np.array([0.1, 0.05, 0.15])  # object box half sizes
 MESH = trimesh.creation.box(extents=2 * HALF)
@@ -173,7 +174,7 @@ def test_params_to_dict():
     json.dumps(d)
 
 
-PARAHOME = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "skillmimic_parahome"
+PARAHOME = SHARED_DATA / "skillmimic_parahome"
 
 
 @pytest.mark.shared_data

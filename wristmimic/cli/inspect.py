@@ -81,6 +81,9 @@ def summarize(ds: Dataset) -> dict[str, Any]:
             info["geometric_vs_labels_hands"] = {
                 k: round(v, 3) for k, v in _agreement(geo[:, hands], labels[:, hands]).items()
             }
+            lh, rh = h.roles["left_hand"], h.roles["right_hand"]
+            flags_geo = np.stack([(geo[:, lh] == 1).any(1), (geo[:, rh] == 1).any(1)], axis=1)
+            info["geometric_vs_labels_hand_flags"] = round(float((flags_geo == hand).mean()), 3)
         out["sequences"][row["id"]] = info
     return out
 
@@ -128,5 +131,6 @@ def inspect_cmd(
             line += (
                 f"\n      geometry vs source labels: equal {a['equal']:.3f} (hands {h['equal']:.3f}), "
                 f"hand contact precision {h['contact_precision']:.3f} recall {h['contact_recall']:.3f}"
+                f"; per-hand contact flag agreement {s['geometric_vs_labels_hand_flags']:.3f}"
             )
         typer.echo(line)

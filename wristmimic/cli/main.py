@@ -5,7 +5,7 @@ from __future__ import annotations
 import typer
 
 from wristmimic import __version__
-from wristmimic.cli import convert, inspect, validate
+from wristmimic.cli import convert, inspect, scene, validate
 
 app = typer.Typer(
     name="wristmimic",
@@ -18,6 +18,7 @@ app = typer.Typer(
 app.add_typer(convert.app, name="convert")
 app.command("inspect")(inspect.inspect_cmd)
 app.command("validate")(validate.validate_cmd)
+app.command("scene")(scene.scene_cmd)
 
 
 def _version(value: bool) -> None:

@@ -1,0 +1,110 @@
+"""The batched environment on both humanoid families and every variant: shapes, NaNs, reference resets,
+batched vs one-world-at-a-time equality, truncation and auto-reset."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from wristmimic.convert.common import ConvertOptions
+from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
+from wristmimic.env import window as W
+from wristmimic.env.config import VARIANTS, EnvConfig, TerminationConfig, variant_config
+from wristmimic.env.vec_env import WristMimicEnv
+
+from synthetic import write_intermimic_folder, write_parahome_folder
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, str]]:
+    tmp = tmp_path_factory.mktemp("env")
+    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
+    convert_intermimic(write_intermimic_folder(tmp / "im", T=50), tmp / "im.h5", options=opts)
+    convert_skillmimic_parahome(write_parahome_folder(tmp / "ph", T=50), tmp / "ph.h5", options=opts)
+    return {"smplx": (tmp / "im.h5", "sub1_box_000"), "parahome": (tmp / "ph.h5", "s1_move_box")}
+
+
+@pytest.mark.parametrize("family", ["smplx", "parahome"])
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_reset_and_step_every_variant_and_humanoid(files, family: str, variant: str) -> None:
+    path, sid = files[family]
+    env = WristMimicEnv.from_file(path, sid, num_worlds=3, config=variant_config(variant), seed=1, nthread=1)
+    obs, _ = env.reset()
+    assert obs.shape == (3, env.observation_size) and obs.dtype == torch.float32
+    assert env.action_size == 3 * (env.scene.skeleton.num_bodies - 1)
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(5):
+        obs, rew, term, trunc, info = env.step(torch.rand(3, env.action_size, generator=gen) * 2 - 1)
+        assert torch.isfinite(obs).all() and torch.isfinite(rew).all()
+        assert rew.shape == term.shape == trunc.shape == (3,)
+        assert ((rew >= 0) & (rew <= 1)).all()
+    finger_goal = env.cfg.finger_targets
+    n_track = len(env.tracked)
+    assert n_track == len(env.scene.humanoid.roles["key_bodies"]) + (
+        len(env.scene.humanoid.roles["fingers"]) if finger_goal else 0
+    )
+    env.close()
+
+
+def test_goal_differences_are_zero_after_a_reference_reset(files) -> None:
+    path, sid = files["smplx"]
+    env = WristMimicEnv.from_file(path, sid, num_worlds=4, config=EnvConfig(goal_horizons=(0,)), nthread=1)
+    obs, _ = env.reset(start_frames=torch.tensor([0, 7, 20, 33]))
+    for name in ("dpos", "drot", "obj_dpos", "obj_drot", "dig"):
+        block = obs[:, env.obs_layout[f"goal0/{name}"]]
+        assert block.abs().max() < 2e-3, (name, block.abs().max())
+    # a horizon ahead is not zero: the motion moves
+    env2 = WristMimicEnv.from_file(path, sid, num_worlds=1, config=EnvConfig(goal_horizons=(5,)), nthread=1)
+    obs2, _ = env2.reset(start_frames=torch.tensor([7]))
+    assert obs2[:, env2.obs_layout["goal5/dpos"]].abs().max() > 1e-2
+
+
+NO_END = TerminationConfig(fall_height=-1.0, body_error=1e9, object_error=1e9, contact_lost_frames=10**6)
+
+
+def test_batched_equals_one_world_at_a_time(files) -> None:
+    """Same start frames and actions: 3 worlds stepped together (2 threads) equal 3 single-world envs.
+    Terminations are off so that no auto-reset draws a random start frame."""
+    path, sid = files["smplx"]
+    cfg = EnvConfig(wrist_resets=False, termination=NO_END)
+    frames = torch.tensor([0, 5, 11])
+    actions = torch.rand(6, 3, 153, generator=torch.Generator().manual_seed(3)) * 2 - 1
+    batched = WristMimicEnv.from_file(path, sid, num_worlds=3, config=cfg, nthread=2)
+    obs_b, _ = batched.reset(start_frames=frames)
+    out_b = [batched.step(a) for a in actions]
+    for w in range(3):
+        single = WristMimicEnv.from_file(path, sid, num_worlds=1, config=cfg, nthread=1)
+        obs_s, _ = single.reset(start_frames=frames[w : w + 1])
+        assert torch.allclose(obs_s[0], obs_b[w], atol=1e-5)
+        for k, a in enumerate(actions):
+            o, r, te, tr, _ = single.step(a[w : w + 1])
+            assert torch.allclose(o[0], out_b[k][0][w], atol=1e-4), (w, k)
+            assert torch.allclose(r[0], out_b[k][1][w], atol=1e-5)
+            assert te[0] == out_b[k][2][w] and tr[0] == out_b[k][3][w]
+
+
+def test_truncation_at_sequence_end_and_auto_reset(files) -> None:
+    path, sid = files["smplx"]
+    env = WristMimicEnv.from_file(
+        path, sid, num_worlds=2, config=EnvConfig(wrist_resets=False, termination=NO_END), nthread=1
+    )
+    T = env.ref.num_frames
+    env.reset(start_frames=torch.tensor([T - 3, 0]))
+    for _ in range(2):
+        _, _, term, trunc, info = env.step(torch.zeros(2, env.action_size))
+    assert trunc.tolist() == [True, False] and not term.any()
+    assert info["time_outs"][0] and env.frame[0] < T - 1  # world 0 was reset to a new start frame
+
+
+def test_window_phase_follows_t_c(files) -> None:
+    path, sid = files["smplx"]
+    env = WristMimicEnv.from_file(path, sid, num_worlds=1, nthread=1)
+    t_c = env.ref.t_c
+    assert t_c == int(env.ref.first_contact[env.ref.first_contact >= 0].min())
+    for f, expected in ((t_c - 2, W.GRASP), (t_c + 13, W.STABILIZE), (t_c + 16, W.OUTSIDE)):
+        if 0 <= f < env.ref.num_frames:
+            env.frame[:] = f
+            assert env._window()[1].item() == expected

@@ -1,0 +1,271 @@
+"""Reward factors on a crafted 10-body toy state, against numbers worked out by hand in the comments."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from wristmimic.env.bodies import BodySets
+from wristmimic.env.config import EnvConfig, variant_config
+from wristmimic.env.rewards import RewardInputs, arm_weights, compute_reward, error_ig, factor_names
+from wristmimic.humanoid.roles import compute_roles, detect_profile
+from wristmimic.humanoid.skeleton import load_skeleton
+
+from synthetic import parahome_like_mjcf, smplx_like_mjcf
+
+# Toy humanoid: 0 root, 1 spine, 2 L shoulder, 3 L elbow, 4 L wrist, 5 R shoulder, 6 R elbow, 7 R wrist,
+# 8 L finger, 9 R finger.
+ROLES = {
+    "key_bodies": np.array([1, 2, 3, 4, 5, 6, 7]),
+    "wrists": np.array([4, 7]),
+    "left_arm": np.array([2, 3]),
+    "right_arm": np.array([5, 6]),
+    "fingers": np.array([8, 9]),
+    "left_hand": np.array([4, 8]),
+    "right_hand": np.array([7, 9]),
+}
+SETS = BodySets.from_roles(ROLES)
+N, B = 3, 10
+HALF = math.log(2.0) / 5.0  # reference distance giving w_near = exp(-5 d) = 0.5
+FAR = 100.0  # w_near = 0
+
+# per body: position offset (sim - ref), rotation angle about z (ref = identity), reference object distance
+OFFSET = [(5, 0, 0), (0.1, 0, 0), (0.2, 0, 0), (0.2, 0, 0), (0.1, 0, 0), (0.3, 0, 0), (0.3, 0, 0), (0, 0.2, 0),
+          (0.5, 0, 0), (0, 0, 0)]  # fmt: skip
+ANGLE = [1.0, 0.4, 0.2, 0.6, 0.3, 0.1, 0.8, 0.1, 0.7, 0.4]
+DIST = [0.0, 0.0, FAR, HALF, 0.0, FAR, HALF, FAR, 0.0, FAR]  # w_near: 1 1 0 .5 1 0 .5 0 1 0
+
+
+def _zrot(angles: list[float]) -> torch.Tensor:
+    a = torch.tensor(angles, dtype=torch.float64)
+    z = torch.zeros_like(a)
+    return torch.stack([torch.cos(a / 2), z, z, torch.sin(a / 2)], -1).float()
+
+
+def _ident(*shape: int) -> torch.Tensor:
+    q = torch.zeros(*shape, 4)
+    q[..., 0] = 1.0
+    return q
+
+
+def toy_inputs() -> RewardInputs:
+    """World 0 outside the window, world 1 inside with the left hand grasping, world 2 inside with both."""
+    ig = torch.randn(N, 7, 4, 3, generator=torch.Generator().manual_seed(0))
+    labels = torch.zeros(N, B, dtype=torch.int8)
+    labels[0, [1, 7]] = 1
+    labels[0, 2] = -1
+    labels[0, [0, 8, 9]] = 1  # root and fingers are not 'other' contact bodies: ignored
+    labels[2, :] = -1
+    contact = torch.zeros(N, B, dtype=torch.bool)
+    contact[0, [1, 2]] = True
+    obj_vel = torch.zeros(N, 2, 6)
+    obj_vel[:, 0, 0] = 0.1
+    obj_vel[:, 0, 5] = 0.2
+    force = torch.zeros(N, B, 3)
+    force[:, 0] = torch.tensor([0.0, 0.0, 500.0])
+    force[:, 2] = torch.tensor([10.0, -20.0, 0.0])
+    return RewardInputs(
+        body_pos=torch.tensor(OFFSET, dtype=torch.float32).expand(N, B, 3).clone(),
+        body_quat=_zrot(ANGLE).expand(N, B, 4).clone(),
+        ref_body_pos=torch.zeros(N, B, 3),
+        ref_body_quat=_ident(N, B),
+        ref_near_dist=torch.tensor(DIST).expand(N, B).clone(),
+        obj_pos=torch.tensor([[1.1, 0.2, 0.5], [0.0, 1.0, 0.3]]).expand(N, 2, 3).clone(),
+        obj_quat=_zrot([0.6, 0.0]).expand(N, 2, 4).clone(),
+        ref_obj_pos=torch.tensor([[1.0, 0.0, 0.5], [0.0, 1.0, 0.0]]).expand(N, 2, 3).clone(),
+        ref_obj_quat=_ident(N, 2),
+        ig=ig,
+        ref_ig=ig.clone(),
+        contact_obj=contact,
+        ref_labels=labels,
+        ref_hand=torch.tensor([[True, True], [True, False], [False, False]]),
+        sim_hand=torch.tensor([[True, False], [False, True], [False, False]]),
+        joint_vel=torch.tensor([0.1, 0.2, -0.2]).expand(N, 3).clone(),
+        prev_joint_vel=torch.zeros(N, 3),
+        obj_vel=obj_vel,
+        prev_obj_vel=torch.zeros(N, 2, 6),
+        contact_force=force,
+        in_window=torch.tensor([False, True, True]),
+        grasp_hands=torch.tensor([[True, False], [True, False], [True, True]]),
+        step=torch.tensor([5, 1, 2]),
+        dt=1.0 / 30.0,
+    )
+
+
+def _close(got: torch.Tensor, expected: list[float]) -> None:
+    assert got.shape == (len(expected),)
+    assert np.allclose(got.numpy(), expected, rtol=1e-5, atol=1e-6), (got.tolist(), expected)
+
+
+def test_body_sets_from_roles() -> None:
+    assert SETS.body.tolist() == [1, 2, 3, 5, 6]
+    assert SETS.key.tolist() == [1, 2, 3, 4, 5, 6, 7] and SETS.contact_other.tolist() == SETS.key.tolist()
+    assert SETS.wrists.tolist() == [4, 7] and SETS.left_hand.tolist() == [4, 8]
+    assert SETS.body.dtype == torch.long
+
+
+@pytest.mark.parametrize(("mjcf", "nb", "k"), [(smplx_like_mjcf, 19, 21), (parahome_like_mjcf, 20, 22)])
+def test_body_sets_of_the_humanoids(mjcf, nb: int, k: int) -> None:
+    skel = load_skeleton(mjcf())
+    sets = BodySets.from_roles(compute_roles(skel, detect_profile(skel)))
+    assert sets.body.numel() == nb and sets.key.numel() == k
+    assert not set(sets.wrists.tolist()) & set(sets.body.tolist())
+    assert set(sets.left_arm.tolist()) | set(sets.right_arm.tolist()) <= set(sets.body.tolist())
+    assert not set(sets.fingers.tolist()) & set(sets.key.tolist())
+
+
+def test_wristmimic_body_and_wrist_factors() -> None:
+    reward, info = compute_reward(toy_inputs(), SETS, variant_config("wristmimic"))
+    # body set [1, 2, 3, 5, 6]: w_near |dp|^2 = [.01, 0, .02, 0, .045], (1 - w_near) angle = [0, .2, .3, .1, .4]
+    # world 0 (outside): E_p = .075/5, E_r = 1.0/5, lambdas 30 / 2.5
+    # world 1 (inside, left grasping, bodies 2 and 3 off): E_p = .055/3, E_r = .5/3, lambdas 10 / 1
+    # world 2 (inside, both grasping, only body 1 left): E_p = .01, E_r = 0
+    _close(info["error/body_pos"], [0.015, 0.055 / 3, 0.01])
+    _close(info["error/body_rot"], [0.2, 0.5 / 3, 0.0])
+    _close(info["reward/body_pos"], [math.exp(-0.45), math.exp(-10 * 0.055 / 3), math.exp(-0.1)])
+    _close(info["reward/body_rot"], [math.exp(-0.5), math.exp(-0.5 / 3), 1.0])
+    # wrists 4 and 7: |dp|^2 = .01, .04 -> .025; angles .3, .1 -> .2; lambdas 10 / 1 in every world
+    _close(info["error/wrist_pos"], [0.025] * 3)
+    _close(info["reward/wrist_pos"], [math.exp(-0.25)] * 3)
+    _close(info["reward/wrist_rot"], [math.exp(-0.2)] * 3)
+    assert "reward/finger_pos" not in info and "reward/finger_rot" not in info
+    assert reward.shape == (N,)
+
+
+def test_object_ig_contact_and_energy_factors() -> None:
+    _, info = compute_reward(toy_inputs(), SETS, variant_config("wristmimic"))
+    # objects: dp = (.1, .2, 0), (0, 0, .3) -> (.01 + .04 + .09)/6; angles .6, 0 -> .3
+    _close(info["reward/obj_pos"], [math.exp(-5 * 0.14 / 6)] * 3)
+    _close(info["reward/obj_rot"], [math.exp(-0.1 * 0.3)] * 3)
+    _close(info["reward/ig"], [1.0] * 3)  # ig == ref_ig
+    # hand: world 0 right hand lost, world 1 left hand lost, world 2 no reference contact
+    half = 0.5 * (1 + math.exp(-10))
+    _close(info["reward/contact_hand"], [half, half, 1.0])
+    _close(info["error/contact_hand"], [1.0, 1.0, 0.0])
+    # other, world 0: labels on key bodies 1 (+1, touching), 2 (-1, touching), 7 (+1, not) -> 2/3 wrong
+    _close(info["error/contact_other"], [2 / 3, 0.0, 0.0])
+    _close(info["reward/contact_other"], [math.exp(-5 * 2 / 3), 1.0, 1.0])
+    # energy (world 1 has step 1 < 2 -> factor 1): joint acc 30 * (.1, .2, -.2) -> mean(9, 36, 36) = 27
+    _close(info["reward/joint_energy"], [math.exp(-2e-5 * 27), 1.0, math.exp(-2e-5 * 27)])
+    _close(info["error/joint_energy"], [27.0, 0.0, 27.0])
+    # object acc: linear (3, 0, 0, 0, 0, 0) -> 9/6; angular (0, 0, 6, 0, 0, 0) -> 36/6
+    _close(info["reward/obj_energy_lin"], [math.exp(-2e-5 * 1.5), 1.0, math.exp(-2e-5 * 1.5)])
+    _close(info["reward/obj_energy_ang"], [math.exp(-2e-5 * 6), 1.0, math.exp(-2e-5 * 6)])
+    # contact forces: |500| + |10| + |-20| = 530 -> 530^2
+    _close(info["reward/contact_energy"], [math.exp(-1e-9 * 530**2), 1.0, math.exp(-1e-9 * 530**2)])
+
+
+def test_reward_is_the_product_of_the_logged_factors() -> None:
+    cfg = variant_config("wristmimic")
+    reward, info = compute_reward(toy_inputs(), SETS, cfg)
+    names = factor_names(cfg)
+    assert {k for k in info if k.startswith("reward/")} == {f"reward/{n}" for n in names}
+    assert {k for k in info if k.startswith("error/")} == {f"error/{n}" for n in names}
+    prod = torch.stack([info[f"reward/{n}"] for n in names]).prod(0)
+    assert torch.allclose(reward, prod)
+    # world 1 by hand: body .0183/.1667, wrists .25/.2, objects, contact hand, energies all 1
+    w1 = math.exp(-10 * 0.055 / 3 - 0.5 / 3 - 0.25 - 0.2 - 5 * 0.14 / 6 - 0.03) * 0.5 * (1 + math.exp(-10))
+    assert reward[1].item() == pytest.approx(w1, rel=1e-5)
+    for v in info.values():
+        assert v.shape == (N,) and torch.isfinite(v).all()
+
+
+def test_window_modulation_zeroes_exactly_the_grasping_arm() -> None:
+    x = toy_inputs()
+    x.in_window = torch.tensor([True, True, False])
+    x.grasp_hands = torch.tensor([[True, False], [False, True], [True, True]])
+    m = arm_weights(x, SETS.body, SETS, variant_config("wristmimic"))  # columns: bodies 1, 2, 3, 5, 6
+    assert m.tolist() == [[1, 0, 0, 1, 1], [1, 1, 1, 0, 0], [1, 1, 1, 1, 1]]
+    off = arm_weights(x, SETS.body, SETS, variant_config("reset-only"))
+    assert (off == 1).all()
+
+
+def test_without_modulation_lambdas_stay_high_inside_the_window() -> None:
+    _, info = compute_reward(toy_inputs(), SETS, variant_config("reset-only"))
+    _close(info["reward/body_pos"], [math.exp(-0.45)] * 3)
+    _close(info["reward/body_rot"], [math.exp(-0.5)] * 3)
+    assert "reward/wrist_pos" in info
+
+
+@pytest.mark.parametrize("variant", ["decoupled", "intermimic"])
+def test_decoupled_and_intermimic_fold_wrists_into_the_body_terms(variant: str) -> None:
+    _, info = compute_reward(toy_inputs(), SETS, variant_config(variant))
+    assert "reward/wrist_pos" not in info and "reward/wrist_rot" not in info
+    # bodies [1, 2, 3, 5, 6, 4, 7]: w |dp|^2 adds .01 (wrist 4, w 1) + 0 (wrist 7, w 0) -> .085/7
+    # (1 - w) angle adds 0 + .1 -> 1.1/7; no modulation: lambdas 30 / 2.5 in every world
+    _close(info["error/body_pos"], [0.085 / 7] * 3)
+    _close(info["reward/body_pos"], [math.exp(-30 * 0.085 / 7)] * 3)
+    _close(info["reward/body_rot"], [math.exp(-2.5 * 1.1 / 7)] * 3)
+    assert ("reward/finger_pos" in info) == (variant == "intermimic")
+
+
+@pytest.mark.parametrize("variant", ["finger-guidance", "intermimic"])
+def test_finger_terms_only_with_finger_targets(variant: str) -> None:
+    cfg = variant_config(variant)
+    assert cfg.finger_targets
+    _, info = compute_reward(toy_inputs(), SETS, cfg)
+    # fingers 8 (w 1, |dp|^2 .25, angle .7 ignored) and 9 (w 0, dp 0, angle .4): E_fp = .125, E_fr = .2
+    _close(info["reward/finger_pos"], [math.exp(-30 * 0.125)] * 3)
+    _close(info["reward/finger_rot"], [math.exp(-2.5 * 0.2)] * 3)
+    _, plain = compute_reward(toy_inputs(), SETS, replace(cfg, finger_targets=False))
+    assert not any("finger" in k for k in plain)
+
+
+def test_weights_come_from_config() -> None:
+    cfg = variant_config("wristmimic")
+    cfg = replace(cfg, weights=replace(cfg.weights, p=60.0, gwp=0.0))
+    _, info = compute_reward(toy_inputs(), SETS, cfg)
+    _close(info["reward/body_pos"][:1], [math.exp(-0.9)])
+    _close(info["reward/wrist_pos"], [1.0] * 3)
+
+
+def test_ig_small_case_by_hand() -> None:
+    x = toy_inputs()
+    x.ig = torch.tensor([[1.0, 0, 0], [0, 0.05, 0]]).reshape(1, 1, 2, 3)
+    x.ref_ig = torch.tensor([[0.5, 0, 0], [0, 0.05, 0]]).reshape(1, 1, 2, 3)
+    # w1 = [1, 1/max(.0025, .01)] = [1, 100] / 101; w2 = [4, 100] / 104; only pair 0 differs (.25)
+    expected = 0.5 * 0.25 * (1 / 101 + 4 / 104)
+    assert error_ig(x).item() == pytest.approx(expected, rel=1e-5)
+
+
+def test_ig_matches_a_brute_force_loop() -> None:
+    g = torch.Generator().manual_seed(3)
+    x = toy_inputs()
+    n, k, p = 2, 3, 5
+    x.ig = torch.randn(n, k, p, 3, generator=g) * 0.5
+    x.ig[0, 1, 2] = torch.tensor([0.01, 0.0, 0.02])  # below the 0.1 m clamp
+    x.ref_ig = x.ig + torch.randn(n, k, p, 3, generator=g) * 0.1
+    ig, ref = x.ig.double().numpy(), x.ref_ig.double().numpy()
+    expected = []
+    for i in range(n):
+        w1 = np.zeros((k, p))
+        w2 = np.zeros((k, p))
+        for a in range(k):
+            for b in range(p):
+                w1[a, b] = 1.0 / max(float(ig[i, a, b] @ ig[i, a, b]), 0.01)
+                w2[a, b] = 1.0 / max(float(ref[i, a, b] @ ref[i, a, b]), 0.01)
+        w1 /= w1.sum()
+        w2 /= w2.sum()
+        e = 0.0
+        for a in range(k):
+            for b in range(p):
+                d = ig[i, a, b] - ref[i, a, b]
+                e += 0.5 * float(d @ d) * (w1[a, b] + w2[a, b])
+        expected.append(e)
+    assert np.allclose(error_ig(x).numpy(), expected, rtol=1e-5)
+
+
+def test_no_objects_gives_finite_factors() -> None:
+    x = toy_inputs()
+    x.obj_pos = x.ref_obj_pos = x.obj_vel = x.prev_obj_vel = torch.zeros(N, 0, 3)
+    x.obj_vel = x.prev_obj_vel = torch.zeros(N, 0, 6)
+    x.obj_quat = x.ref_obj_quat = torch.zeros(N, 0, 4)
+    x.ig = x.ref_ig = torch.zeros(N, 7, 0, 3)
+    reward, info = compute_reward(x, SETS, EnvConfig())
+    assert torch.isfinite(reward).all()
+    _close(info["reward/obj_pos"], [1.0] * 3)
+    _close(info["reward/ig"], [1.0] * 3)

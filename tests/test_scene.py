@@ -1,0 +1,125 @@
+"""Scene builder: gains by body part, finger ranges, collision filtering, objects, sensors, MJCF export,
+and the reference replay that chose the timestep."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from wristmimic.cli.main import app
+from wristmimic.convert.common import ConvertOptions
+from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
+from wristmimic.format import open_dataset
+from wristmimic.scene import SceneConfig, build_scene, finger_ranges, gain_groups
+
+from synthetic import write_intermimic_folder, write_parahome_folder
+
+
+@pytest.fixture(scope="module")
+def synth_files(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    tmp = tmp_path_factory.mktemp("scene")
+    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
+    im = tmp / "im.h5"
+    convert_intermimic(write_intermimic_folder(tmp / "im"), im, options=opts)
+    ph = tmp / "ph.h5"
+    convert_skillmimic_parahome(write_parahome_folder(tmp / "ph"), ph, options=opts)
+    return im, ph
+
+
+def test_smplx_scene_gains_ranges_and_collisions(synth_files: tuple[Path, Path]) -> None:
+    with open_dataset(synth_files[0]) as ds:
+        sc = build_scene(ds, "sub1_box_000")
+    m = sc.model
+    assert m.nu == 153 and m.opt.timestep == pytest.approx(1 / 120) and m.numeric_data[0] == 4
+    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    names = sc.skeleton.body_names
+    gain = {names[b]: tuple(sc.gains[3 * j]) for j, b in enumerate(sc.skeleton.joint_bodies)}
+    assert gain["L_Knee"] == (800, 80) and gain["Spine"] == (1000, 100) and gain["L_Elbow"] == (500, 50)
+    assert gain["R_Toe"] == (500, 50) and gain["L_Index2"] == (100, 10) and gain["Head"] == (500, 50)
+    # position actuators: kp on gainprm, -kp / -kv on biasprm; joint springs and damping zeroed
+    a = sc.actuator_ids[0, 0]
+    assert m.actuator_gainprm[a, 0] == 800 and m.actuator_biasprm[a, 1] == -800 and m.actuator_biasprm[a, 2] == -80
+    assert np.all(m.jnt_stiffness == 0) and np.all(m.dof_damping[6 : 6 + 153] == 0)
+    assert np.allclose(m.dof_armature[6 : 6 + 153], 0.02)
+    # InterMimic finger ranges
+    j = {n: k for k, n in enumerate(names)}
+    r3 = m.jnt_range[sc.model.actuator_trnid[sc.actuator_ids[j["L_Index3"] - 1], 0]]
+    assert np.allclose(np.rad2deg(r3[0]), [-90, 5.625]) and np.allclose(np.rad2deg(r3[1]), [-5.625, 5.625])
+    r1 = m.jnt_range[sc.model.actuator_trnid[sc.actuator_ids[j["R_Thumb1"] - 1], 0]]
+    assert np.allclose(np.rad2deg(r1), [[-55.625, 55.625]] * 3)
+    # no self-collision; humanoid meets objects and floor
+    hum = [g for g in range(m.ngeom) if m.geom_bodyid[g] in sc.body_ids]
+    other = [g for g in range(m.ngeom) if g not in hum and m.geom_contype[g]]
+    collide = lambda a, b: bool(m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])  # noqa: E731
+    assert not any(collide(a, b) for a in hum for b in hum)
+    assert all(collide(a, b) for a in hum[:5] for b in other)
+    # dynamic object: stored mass, hull geoms, free joint
+    o = sc.objects[0]
+    assert o.dynamic and m.body_mass[o.body_id] == pytest.approx(o.record.mass)
+    hulls = [g for g in range(m.ngeom) if m.geom_bodyid[g] == o.body_id and m.geom_contype[g]]
+    assert len(hulls) == o.record.num_hulls
+    assert {"pos:Pelvis", "contact:L_Wrist", "touch:L_Index3:box", "quat:obj_box"} <= set(sc.sensors)
+
+
+def test_parahome_scene_has_fixed_supports(synth_files: tuple[Path, Path]) -> None:
+    with open_dataset(synth_files[1]) as ds:
+        sc = build_scene(ds, "s1_move_box")
+    groups = gain_groups(sc.skeleton, sc.humanoid.roles)
+    names = sc.skeleton.body_names
+    assert {names[b] for b in groups["toes"]} == {"jLeftBallFoot", "jRightBallFoot"}
+    assert "jL5S1" in {names[b] for b in groups["torso"]} and "jT1C7" in {names[b] for b in groups["arms"]}
+    fr = finger_ranges(sc.skeleton, sc.humanoid.roles)
+    assert len(fr) == 38
+    static = [o for o in sc.objects if not o.dynamic]
+    assert static and all(sc.model.body_jntnum[o.body_id] == 0 for o in static)
+
+
+def _replay(ds, sid: str, cfg: SceneConfig) -> dict:
+    sc = build_scene(ds, sid, cfg)
+    m, d = sc.model, mujoco.MjData(sc.model)
+    s = ds.sequence(sid).load()
+    d.qpos[0:3], d.qpos[3:7] = s.root_pos[0], s.root_quat[0]
+    d.qpos[sc.hinge_qposadr.ravel()] = s.joint_angles[0].ravel()
+    for k, o in enumerate(sc.objects):
+        if o.dynamic:
+            d.qpos[o.qposadr : o.qposadr + 3], d.qpos[o.qposadr + 3 : o.qposadr + 7] = (
+                s.object_pos[0, k],
+                s.object_quat[0, k],
+            )
+    mujoco.mj_forward(m, d)
+    maxv = 0.0
+    for t in range(1, s.num_frames):
+        d.ctrl[sc.actuator_ids.ravel()] = np.clip(s.joint_angles[t].ravel(), sc.ctrl_range[:, 0], sc.ctrl_range[:, 1])
+        for _ in range(cfg.substeps):
+            mujoco.mj_step(m, d)
+        assert np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all(), (sid, t)
+        maxv = max(maxv, float(np.abs(d.qvel).max()))
+    return {"maxv": maxv, "warnings": sum(int(w.number) for w in d.warning)}
+
+
+@pytest.mark.shared_data
+def test_reference_replay_through_pd_is_stable_on_every_shared_sequence(omomo_h5: Path, parahome_h5: Path) -> None:
+    """The chosen timestep (1/120 s, 4 substeps, implicitfast) replays every shared reference through the PD
+    controller with no NaN, no solver warning and bounded velocities (the humanoid may fall: balance is the
+    policy's job)."""
+    cfg = SceneConfig()
+    for f in (omomo_h5, parahome_h5):
+        with open_dataset(f) as ds:
+            for sid in ds.sequence_ids:
+                r = _replay(ds, sid, cfg)
+                assert r["warnings"] == 0 and r["maxv"] < 100.0, (sid, r)
+
+
+def test_scene_cli_exports_loadable_mjcf(synth_files: tuple[Path, Path], tmp_path: Path) -> None:
+    out = tmp_path / "scene.xml"
+    r = CliRunner().invoke(app, ["scene", str(synth_files[0]), "sub1_box_000", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    m = mujoco.MjModel.from_xml_path(str(out))
+    assert m.nu == 153 and m.numeric_data[0] == 4
+    r = CliRunner().invoke(app, ["scene", str(synth_files[0]), "nope", "-o", str(out)])
+    assert r.exit_code == 1 and "nope" in r.stderr

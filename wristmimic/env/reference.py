@@ -1,0 +1,137 @@
+"""The reference motion of one sequence as torch tensors, with the derived quantities the environment needs.
+
+Everything is precomputed once per scene (T frames) so that per-step work is indexing ``ref.x[frames]``.
+Velocities are forward finite differences x 30 fps (last frame repeats the one before), as in InterMimic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from wristmimic.format.reader import Dataset
+from wristmimic.rotations import quat_conj, quat_mul, quat_rotate, quat_to_rotvec
+from wristmimic.scene import Scene
+
+
+def _fdiff(x: np.ndarray, fps: float) -> np.ndarray:
+    v = np.zeros_like(x)
+    if len(x) > 1:
+        v[:-1] = (x[1:] - x[:-1]) * fps
+        v[-1] = v[-2]
+    return v
+
+
+def _angvel(q: np.ndarray, fps: float, local: bool) -> np.ndarray:
+    """Angular velocity (rad/s) from consecutive wxyz quaternions; world frame, or body frame if ``local``."""
+    w = np.zeros(q.shape[:-1] + (3,))
+    if len(q) > 1:
+        rel = quat_mul(quat_conj(q[:-1]), q[1:]) if local else quat_mul(q[1:], quat_conj(q[:-1]))
+        w[:-1] = quat_to_rotvec(rel) * fps
+        w[-1] = w[-2]
+    return w
+
+
+@dataclass
+class Reference:
+    """Reference tensors (float32 unless stated); T frames, B bodies, D = 3 J hinges, O dynamic objects."""
+
+    num_frames: int
+    fps: float
+    root_pos: torch.Tensor  # (T, 3)
+    root_quat: torch.Tensor  # (T, 4)
+    root_linvel: torch.Tensor  # (T, 3) world
+    root_angvel_local: torch.Tensor  # (T, 3) body frame (MuJoCo free-joint convention)
+    joint_angles: torch.Tensor  # (T, D)
+    joint_vel: torch.Tensor  # (T, D)
+    body_pos: torch.Tensor  # (T, B, 3)
+    body_quat: torch.Tensor  # (T, B, 4)
+    body_linvel: torch.Tensor  # (T, B, 3)
+    body_angvel: torch.Tensor  # (T, B, 3) world
+    obj_pos: torch.Tensor  # (T, O, 3)
+    obj_quat: torch.Tensor  # (T, O, 4)
+    obj_linvel: torch.Tensor  # (T, O, 3)
+    obj_angvel_local: torch.Tensor  # (T, O, 3)
+    obj_angvel: torch.Tensor  # (T, O, 3) world
+    labels: torch.Tensor  # (T, B) int8
+    hand: torch.Tensor  # (T, 2) bool
+    near_dist: torch.Tensor  # (T, B) distance of each body to the nearest object surface point
+    points_local: torch.Tensor  # (P, 3) surface points of the dynamic objects, each in its object's frame
+    points_object: torch.Tensor  # (P,) long: which dynamic object each point belongs to
+    points: torch.Tensor  # (T, P, 3) the same points posed in the world
+    first_contact: torch.Tensor  # (2,) long
+    t_c: int  # earliest first contact frame of the grasping hands, -1 if none
+    grasp_hands: torch.Tensor  # (2,) bool
+
+    def to(self, device: str | torch.device) -> Reference:
+        return Reference(**{k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in self.__dict__.items()})
+
+
+def load_reference(ds: Dataset, scene: Scene, ig_points: int = 1024, seed: int = 0) -> Reference:
+    """Read the sequence of ``scene`` from ``ds`` and derive velocities, surface points and distances."""
+    seq = ds.sequence(scene.sequence_id)
+    s = seq.load()
+    fps = float(ds.attrs.get("fps", 30.0))
+    dyn_idx = [k for k, o in enumerate(scene.objects) if o.dynamic]
+    obj_pos = s.object_pos[:, dyn_idx].astype(np.float64)
+    obj_quat = s.object_quat[:, dyn_idx].astype(np.float64)
+    pts, owner = [], []
+    rng = np.random.default_rng(seed)
+    for j, k in enumerate(dyn_idx):
+        sp = scene.objects[k].record.surface_points.astype(np.float64)
+        if ig_points < len(sp):
+            sp = sp[np.sort(rng.choice(len(sp), ig_points, replace=False))]
+        pts.append(sp)
+        owner.append(np.full(len(sp), j))
+    local = np.concatenate(pts) if pts else np.zeros((0, 3))
+    owner_a = np.concatenate(owner) if owner else np.zeros(0, int)
+    world = (
+        quat_rotate(obj_quat[:, owner_a], local[None]) + obj_pos[:, owner_a]
+        if len(local)
+        else np.zeros((s.num_frames, 0, 3))
+    )
+    body_pos = s.body_pos.astype(np.float64)
+    if len(local):
+        near = np.stack(
+            [np.linalg.norm(body_pos[t, :, None] - world[t, None], axis=-1).min(-1) for t in range(s.num_frames)]
+        )
+    else:
+        near = np.full(body_pos.shape[:2], np.inf)
+    first = s.first_contact_frame.astype(np.int64)
+    grasp = first >= 0
+    t_c = int(first[grasp].min()) if grasp.any() else -1
+    f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
+    angles = s.joint_angles.reshape(s.num_frames, -1).astype(np.float64)
+    dang = np.zeros_like(angles)
+    dang[:-1] = np.angle(np.exp(1j * (angles[1:] - angles[:-1]))) * fps
+    dang[-1] = dang[-2] if len(angles) > 1 else 0
+    return Reference(
+        num_frames=s.num_frames,
+        fps=fps,
+        root_pos=f32(s.root_pos),
+        root_quat=f32(s.root_quat),
+        root_linvel=f32(_fdiff(s.root_pos, fps)),
+        root_angvel_local=f32(_angvel(s.root_quat.astype(np.float64), fps, local=True)),
+        joint_angles=f32(angles),
+        joint_vel=f32(dang),
+        body_pos=f32(body_pos),
+        body_quat=f32(s.body_quat),
+        body_linvel=f32(_fdiff(body_pos, fps)),
+        body_angvel=f32(_angvel(s.body_quat.astype(np.float64), fps, local=False)),
+        obj_pos=f32(obj_pos),
+        obj_quat=f32(obj_quat),
+        obj_linvel=f32(_fdiff(obj_pos, fps)),
+        obj_angvel_local=f32(_angvel(obj_quat, fps, local=True)),
+        obj_angvel=f32(_angvel(obj_quat, fps, local=False)),
+        labels=torch.as_tensor(s.contact_labels, dtype=torch.int8),
+        hand=torch.as_tensor(s.hand_contact, dtype=torch.bool),
+        near_dist=f32(near),
+        points_local=f32(local),
+        points_object=torch.as_tensor(owner_a, dtype=torch.long),
+        points=f32(world),
+        first_contact=torch.as_tensor(first),
+        t_c=t_c,
+        grasp_hands=torch.as_tensor(grasp),
+    )

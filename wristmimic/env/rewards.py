@@ -1,0 +1,260 @@
+"""Multiplicative reward of WristMimic (paper, Learning Wrist-Guided Manipulation; InterMimic's reward), batched.
+
+r = prod_i exp(-lambda_i * E_i) (the hand-contact factor has InterMimic's form 0.5 * (1 + exp(-lambda E))).
+Every ``error_*`` function returns the raw error E of one factor, shape (N,); the lambdas come from
+:class:`wristmimic.env.config.RewardWeights`. :func:`compute_reward` returns the product and each factor as
+``reward/<name>`` plus each raw error as ``error/<name>``, so a user sees which factor collapses.
+
+Factors (names): body_pos, body_rot, [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
+(cfg.finger_targets), obj_pos, obj_rot, ig, contact_hand, contact_other, joint_energy, obj_energy_lin,
+obj_energy_ang, contact_energy.
+Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface points, D hinge joints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from wristmimic.env.bodies import BodySets
+from wristmimic.env.config import EnvConfig, RewardWeights
+from wristmimic.env.torch_math import quat_angle
+
+
+@dataclass(frozen=True)
+class RewardConstants:
+    """Fixed constants of the reward terms that are not weights (InterMimic's values; not in config.py)."""
+
+    energy_start_step: int = 2
+    """Energy factors are 1 (and their errors 0) while step < this (no valid previous velocity yet)."""
+    ig_min_sq_dist: float = 0.01
+    """Interaction-graph weights are 1 / max(|ig|^2, this) (m^2), bounding the weight of touching pairs."""
+
+
+CONSTANTS = RewardConstants()
+
+
+@dataclass
+class RewardInputs:
+    """Everything the reward reads, torch float32 unless stated."""
+
+    body_pos: torch.Tensor  # (N, B, 3) simulated, world
+    body_quat: torch.Tensor  # (N, B, 4) wxyz
+    ref_body_pos: torch.Tensor  # (N, B, 3) reference at the tracked frame
+    ref_body_quat: torch.Tensor  # (N, B, 4)
+    ref_near_dist: torch.Tensor  # (N, B) reference distance body -> nearest reference object surface point (m)
+    obj_pos: torch.Tensor  # (N, O, 3) dynamic objects, simulated
+    obj_quat: torch.Tensor  # (N, O, 4)
+    ref_obj_pos: torch.Tensor  # (N, O, 3)
+    ref_obj_quat: torch.Tensor  # (N, O, 4)
+    ig: torch.Tensor  # (N, K, P, 3) simulated key-body position minus simulated object surface point
+    ref_ig: torch.Tensor  # (N, K, P, 3) the same for the reference
+    contact_obj: torch.Tensor  # (N, B) bool: simulated body touches a dynamic object
+    ref_labels: torch.Tensor  # (N, B) int8 in {-1, 0, 1}: reference contact labels
+    ref_hand: torch.Tensor  # (N, 2) bool: reference hand [left, right] in contact
+    sim_hand: torch.Tensor  # (N, 2) bool: any body of the simulated hand touches a dynamic object
+    joint_vel: torch.Tensor  # (N, D) hinge velocities now
+    prev_joint_vel: torch.Tensor  # (N, D) one control step earlier
+    obj_vel: torch.Tensor  # (N, O, 6) linear + angular velocity now
+    prev_obj_vel: torch.Tensor  # (N, O, 6)
+    contact_force: torch.Tensor  # (N, B, 3) net contact force on each body (N)
+    in_window: torch.Tensor  # (N,) bool: the tracked frame lies in the contact window
+    grasp_hands: torch.Tensor  # (N, 2) bool: hands with a first contact frame in the sequence
+    step: torch.Tensor  # (N,) long: control steps since the episode started
+    dt: float  # control period (s)
+
+
+# --- helpers -------------------------------------------------------------------------------------------------
+
+
+def _mean(v: torch.Tensor, dims: tuple[int, ...]) -> torch.Tensor:
+    """Mean over dims, 0 where those dims are empty (no objects, no points)."""
+    n = 1
+    for d in dims:
+        n *= v.shape[d]
+    return v.sum(dim=dims) / max(n, 1)
+
+
+def _weighted_mean(e: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
+    """(N, J) errors, (N, J) weights -> (N,) sum(m e) / max(sum(m), 1)."""
+    return (m * e).sum(-1) / m.sum(-1).clamp_min(1.0)
+
+
+def _exp(lam: torch.Tensor | float, err: torch.Tensor) -> torch.Tensor:
+    """exp(-lambda * E)."""
+    return torch.exp(-lam * err)
+
+
+def near_weight(ref_near_dist: torch.Tensor, w: RewardWeights) -> torch.Tensor:
+    """InterMimic's w_near = exp(-near_far * d): 1 at the object, -> 0 far from it."""
+    return torch.exp(-w.near_far * ref_near_dist)
+
+
+def tracked_bodies(sets: BodySets, cfg: EnvConfig) -> torch.Tensor:
+    """Bodies of the body terms: sets.body, plus the wrists when there are no separate wrist factors."""
+    return sets.body if cfg.wrist_terms else torch.cat([sets.body, sets.wrists])
+
+
+def modulated(x: RewardInputs, cfg: EnvConfig) -> torch.Tensor:
+    """(N,) bool: window modulation applies (cfg.window_modulation and the frame is in the contact window)."""
+    return x.in_window & cfg.window_modulation
+
+
+def arm_weights(x: RewardInputs, idx: torch.Tensor, sets: BodySets, cfg: EnvConfig) -> torch.Tensor:
+    """(N, J) m_j(t): 0 for the shoulder/elbow of grasping side(s) while modulated, else 1."""
+    left = torch.isin(idx, sets.left_arm)[None] & x.grasp_hands[:, 0:1]
+    right = torch.isin(idx, sets.right_arm)[None] & x.grasp_hands[:, 1:2]
+    off = (left | right) & modulated(x, cfg)[:, None]
+    return (~off).to(x.body_pos.dtype)
+
+
+# --- errors --------------------------------------------------------------------------------------------------
+
+
+def error_pos(x: RewardInputs, idx: torch.Tensor, m: torch.Tensor, w: RewardWeights) -> torch.Tensor:
+    """E_p = sum_j m_j w_near,j |p_ref - p|^2 / max(sum_j m_j, 1) over bodies idx (position near the object)."""
+    e = (x.ref_body_pos[:, idx] - x.body_pos[:, idx]).square().sum(-1)
+    return _weighted_mean(near_weight(x.ref_near_dist[:, idx], w) * e, m)
+
+
+def error_rot(x: RewardInputs, idx: torch.Tensor, m: torch.Tensor, w: RewardWeights) -> torch.Tensor:
+    """E_r = sum_j m_j (1 - w_near,j) angle(q_ref, q) / max(sum_j m_j, 1) over bodies idx (rotation far)."""
+    e = quat_angle(x.ref_body_quat[:, idx], x.body_quat[:, idx])
+    return _weighted_mean((1.0 - near_weight(x.ref_near_dist[:, idx], w)) * e, m)
+
+
+def error_wrist_pos(x: RewardInputs, sets: BodySets) -> torch.Tensor:
+    """E_wp = mean over both wrists of |p_ref - p|^2 (unweighted)."""
+    return (x.ref_body_pos[:, sets.wrists] - x.body_pos[:, sets.wrists]).square().sum(-1).mean(-1)
+
+
+def error_wrist_rot(x: RewardInputs, sets: BodySets) -> torch.Tensor:
+    """E_wr = mean over both wrists of angle(q_ref, q) (rad)."""
+    return quat_angle(x.ref_body_quat[:, sets.wrists], x.body_quat[:, sets.wrists]).mean(-1)
+
+
+def error_obj_pos(x: RewardInputs) -> torch.Tensor:
+    """E_op = mean over objects and xyz of (p_ref - p)^2."""
+    return _mean((x.ref_obj_pos - x.obj_pos).square(), (1, 2))
+
+
+def error_obj_rot(x: RewardInputs) -> torch.Tensor:
+    """E_or = mean over objects of angle(q_ref, q) (rad)."""
+    return _mean(quat_angle(x.ref_obj_quat, x.obj_quat), (1,))
+
+
+def error_ig(x: RewardInputs, min_sq: float = CONSTANTS.ig_min_sq_dist) -> torch.Tensor:
+    """E_ig = 0.5 sum_kp |ig - ig_ref|^2 (w1 + w2), w = 1/max(|ig|^2, min_sq) normalised over all pairs."""
+    w1 = 1.0 / x.ig.square().sum(-1).clamp_min(min_sq)
+    w2 = 1.0 / x.ref_ig.square().sum(-1).clamp_min(min_sq)
+    w1 = w1 / w1.sum((1, 2), keepdim=True)
+    w2 = w2 / w2.sum((1, 2), keepdim=True)
+    return 0.5 * ((x.ig - x.ref_ig).square().sum(-1) * (w1 + w2)).sum((1, 2))
+
+
+def error_contact_hand(x: RewardInputs) -> torch.Tensor:
+    """(N, 2) E per hand = |c_sim - 1| where the reference hand is in contact, else 0."""
+    return (x.ref_hand & ~x.sim_hand).to(x.body_pos.dtype)
+
+
+def error_contact_other(x: RewardInputs, sets: BodySets) -> torch.Tensor:
+    """E = sum mask |c_sim - c_ref| / max(sum mask, 1) over contact_other; target 1 at label 1, 0 at -1, 0 ignored."""
+    labels = x.ref_labels[:, sets.contact_other]
+    mask = (labels != 0).to(x.body_pos.dtype)
+    diff = (x.contact_obj[:, sets.contact_other] != (labels > 0)).to(x.body_pos.dtype)
+    return _weighted_mean(diff, mask)
+
+
+def error_joint_energy(x: RewardInputs) -> torch.Tensor:
+    """E_eg1 = mean over hinges of ((qd - qd_prev) / dt)^2 (joint acceleration)."""
+    return _mean(((x.joint_vel - x.prev_joint_vel) / x.dt).square(), (1,))
+
+
+def error_obj_energy_lin(x: RewardInputs) -> torch.Tensor:
+    """E_eg2,lin = mean over objects and xyz of the object linear acceleration squared."""
+    return _mean(((x.obj_vel[..., :3] - x.prev_obj_vel[..., :3]) / x.dt).square(), (1, 2))
+
+
+def error_obj_energy_ang(x: RewardInputs) -> torch.Tensor:
+    """E_eg2,ang = mean over objects and xyz of the object angular acceleration squared."""
+    return _mean(((x.obj_vel[..., 3:] - x.prev_obj_vel[..., 3:]) / x.dt).square(), (1, 2))
+
+
+def error_contact_energy(x: RewardInputs) -> torch.Tensor:
+    """E_eg3 = (sum over bodies and xyz of |F|)^2 on the humanoid's net contact forces."""
+    return x.contact_force.abs().sum((1, 2)).square()
+
+
+# --- factors -------------------------------------------------------------------------------------------------
+
+
+def reward_contact_hand(err: torch.Tensor, ref_hand: torch.Tensor, lam: float) -> torch.Tensor:
+    """prod over hands of 0.5 (1 + exp(-lambda E)) where the reference hand is in contact, else 1."""
+    f = torch.where(ref_hand, 0.5 * (1.0 + torch.exp(-lam * err)), torch.ones_like(err))
+    return f.prod(-1)
+
+
+def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
+    """Names of the reward factors present for this config, in product order."""
+    names = ["body_pos", "body_rot"]
+    if cfg.wrist_terms:
+        names += ["wrist_pos", "wrist_rot"]
+    if cfg.finger_targets:
+        names += ["finger_pos", "finger_rot"]
+    names += ["obj_pos", "obj_rot", "ig", "contact_hand", "contact_other"]
+    names += ["joint_energy", "obj_energy_lin", "obj_energy_ang", "contact_energy"]
+    return tuple(names)
+
+
+def compute_reward(
+    x: RewardInputs, sets: BodySets, cfg: EnvConfig, consts: RewardConstants = CONSTANTS
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """(N,) reward = product of factors; dict 'reward/<name>' -> (N,) factor, 'error/<name>' -> (N,) raw error.
+
+    Body terms use lambda p / r outside the window and gbp / gbr inside it (window_modulation only).
+    Energy errors are zeroed (factor 1) while step < consts.energy_start_step.
+    """
+    w = cfg.weights
+    mod = modulated(x, cfg)
+    idx = tracked_bodies(sets, cfg)
+    m = arm_weights(x, idx, sets, cfg)
+    errors: dict[str, torch.Tensor] = {
+        "body_pos": error_pos(x, idx, m, w),
+        "body_rot": error_rot(x, idx, m, w),
+    }
+    lams: dict[str, torch.Tensor | float] = {
+        "body_pos": torch.where(mod, w.gbp, w.p),
+        "body_rot": torch.where(mod, w.gbr, w.r),
+    }
+    if cfg.wrist_terms:
+        errors["wrist_pos"], lams["wrist_pos"] = error_wrist_pos(x, sets), w.gwp
+        errors["wrist_rot"], lams["wrist_rot"] = error_wrist_rot(x, sets), w.gwr
+    if cfg.finger_targets:
+        ones = torch.ones(x.body_pos.shape[0], sets.fingers.numel(), dtype=x.body_pos.dtype, device=m.device)
+        errors["finger_pos"], lams["finger_pos"] = error_pos(x, sets.fingers, ones, w), w.fp
+        errors["finger_rot"], lams["finger_rot"] = error_rot(x, sets.fingers, ones, w), w.fr
+    errors["obj_pos"], lams["obj_pos"] = error_obj_pos(x), w.op
+    errors["obj_rot"], lams["obj_rot"] = error_obj_rot(x), w.orot
+    errors["ig"], lams["ig"] = error_ig(x, consts.ig_min_sq_dist), w.ig
+    errors["contact_other"], lams["contact_other"] = error_contact_other(x, sets), w.cg_other
+    active = x.step >= consts.energy_start_step
+    for name, fn, lam in (
+        ("joint_energy", error_joint_energy, w.eg1),
+        ("obj_energy_lin", error_obj_energy_lin, w.eg2),
+        ("obj_energy_ang", error_obj_energy_ang, w.eg2),
+        ("contact_energy", error_contact_energy, w.eg3),
+    ):
+        e = fn(x)
+        errors[name], lams[name] = torch.where(active, e, torch.zeros_like(e)), lam
+
+    factors = {name: _exp(lams[name], e) for name, e in errors.items()}
+    hand_err = error_contact_hand(x)
+    factors["contact_hand"] = reward_contact_hand(hand_err, x.ref_hand, w.cg_hand)
+    errors["contact_hand"] = hand_err.sum(-1)  # reference-contact hands without simulated contact (0, 1, 2)
+
+    order = factor_names(cfg)
+    reward = torch.stack([factors[n] for n in order], dim=-1).prod(-1)
+    info = {f"reward/{n}": factors[n] for n in order}
+    info.update({f"error/{n}": errors[n] for n in order})
+    return reward, info

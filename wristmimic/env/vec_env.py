@@ -1,0 +1,346 @@
+"""The batched WristMimic environment: N worlds of one scene, Gymnasium-style vector API, torch tensors out.
+
+>>> env = WristMimicEnv.from_file("datasets/omomo.h5", "sub2_largetable_000", num_worlds=64, seed=0)
+>>> obs, info = env.reset()
+>>> obs, reward, terminated, truncated, info = env.step(torch.zeros(64, env.action_size))
+
+Worlds that end (terminated or truncated) are reset automatically at the end of ``step``; the returned
+observation is then the first observation of the new episode (``info["time_outs"]`` tells PPO where to
+bootstrap). No Python loop runs over worlds or bodies: physics goes through the backend in one call,
+observation/reward math is batched torch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from wristmimic.env import window as W
+from wristmimic.env.bodies import BodySets
+from wristmimic.env.config import EnvConfig
+from wristmimic.env.observations import RefFrame, SimState, goal_obs, heading_inverse, state_obs
+from wristmimic.env.reference import Reference, load_reference
+from wristmimic.env.rewards import RewardInputs, compute_reward
+from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
+from wristmimic.env.torch_math import quat_rotate
+from wristmimic.format.reader import open_dataset
+from wristmimic.scene import Scene, SceneConfig, build_scene
+from wristmimic.sim.backend import CpuRolloutBackend, PhysicsBackend
+
+
+@dataclass
+class _SensorIndex:
+    """Column indices into sensordata for each batched quantity."""
+
+    body_pos: np.ndarray
+    body_quat: np.ndarray
+    body_linvel: np.ndarray
+    body_angvel: np.ndarray
+    obj_pos: np.ndarray
+    obj_quat: np.ndarray
+    obj_linvel: np.ndarray
+    obj_angvel: np.ndarray
+    contact: np.ndarray  # (B, 4) found, fx, fy, fz
+    touch: np.ndarray  # (B, O)
+
+
+def _sensor_index(scene: Scene) -> _SensorIndex:
+    names = scene.skeleton.body_names
+    dyn = [f"obj_{o.id}" for o in scene.dynamic_objects]
+
+    def cols(kind: str, objs: list[str]) -> np.ndarray:
+        rows = [np.arange(scene.sensors[f"{kind}:{n}"].start, scene.sensors[f"{kind}:{n}"].stop) for n in objs]
+        return np.stack(rows) if rows else np.zeros((0, {"quat": 4}.get(kind, 3)), int)
+
+    touch = np.array(
+        [[scene.sensors[f"touch:{n}:{o.id}"].start for o in scene.dynamic_objects] for n in names], dtype=int
+    ).reshape(len(names), len(dyn))
+    return _SensorIndex(
+        cols("pos", names),
+        cols("quat", names),
+        cols("linvel", names),
+        cols("angvel", names),
+        cols("pos", dyn),
+        cols("quat", dyn),
+        cols("linvel", dyn),
+        cols("angvel", dyn),
+        cols("contact", names),
+        touch,
+    )
+
+
+class WristMimicEnv:
+    """Vectorised WristMimic environment over ``num_worlds`` copies of one sequence's scene."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        reference: Reference,
+        num_worlds: int,
+        config: EnvConfig | None = None,
+        seed: int = 0,
+        backend: PhysicsBackend | None = None,
+        nthread: int | None = None,
+    ):
+        self.scene, self.ref, self.cfg = scene, reference, config or EnvConfig()
+        self.num_worlds = int(num_worlds)
+        self.seed = int(seed)
+        self.backend = backend or CpuRolloutBackend(scene.model, self.num_worlds, nthread)
+        self.sets = BodySets.from_roles(scene.humanoid.roles)
+        self._idx = _sensor_index(scene)
+        self._gen = torch.Generator().manual_seed(self.seed)
+        N = self.num_worlds
+        self.frame = torch.zeros(N, dtype=torch.long)
+        self.start = torch.zeros(N, dtype=torch.long)
+        self.steps = torch.zeros(N, dtype=torch.long)
+        self.lost = ContactLostCounter(N)
+        roles = scene.humanoid.roles
+        fingers = torch.as_tensor(roles["fingers"], dtype=torch.long)
+        key = torch.as_tensor(roles["key_bodies"], dtype=torch.long)
+        non_finger = torch.as_tensor(roles["non_finger"], dtype=torch.long)
+        self.tracked = torch.cat([key, fingers]) if self.cfg.finger_targets else key
+        self.rotated = torch.cat([non_finger, fingers]) if self.cfg.finger_targets else non_finger
+        self.goal_contact = key
+        self.all_bodies = torch.arange(scene.skeleton.num_bodies)
+        self.hands = (torch.as_tensor(roles["left_hand"]), torch.as_tensor(roles["right_hand"]))
+        # action -> PD target (InterMimic): mid-range offset and half-range scale; wide joints centred at 0
+        lo, hi = scene.ctrl_range[:, 0], scene.ctrl_range[:, 1]
+        offset, scale = (lo + hi) / 2, (hi - lo) / 2
+        wide = np.abs(offset) > 0.1
+        offset[wide], scale[wide] = 0.0, np.pi
+        self._offset = torch.as_tensor(offset, dtype=torch.float32)
+        self._scale = torch.as_tensor(scale * self.cfg.action_scale, dtype=torch.float32)
+        self._lo, self._hi = torch.as_tensor(lo, dtype=torch.float32), torch.as_tensor(hi, dtype=torch.float32)
+        self._ctrl = np.zeros((N, scene.model.nu))
+        self._act_cols = scene.actuator_ids.reshape(-1)
+        self._prev_joint_vel = torch.zeros(N, len(self._act_cols))
+        self._prev_obj_vel = torch.zeros(N, len(scene.dynamic_objects), 6)
+        self.action_size = len(self._act_cols)
+        self._obs_layout: dict[str, slice] = {}
+        self.observation_size = 0
+
+    # -- construction --------------------------------------------------------------------------------------
+    @classmethod
+    def from_file(
+        cls,
+        dataset: str | Path,
+        sequence_id: str,
+        num_worlds: int,
+        config: EnvConfig | None = None,
+        scene_config: SceneConfig | None = None,
+        seed: int = 0,
+        nthread: int | None = None,
+    ) -> WristMimicEnv:
+        """Build the scene and reference of ``sequence_id`` from a canonical file."""
+        cfg = config or EnvConfig()
+        with open_dataset(dataset) as ds:
+            scene = build_scene(ds, sequence_id, scene_config)
+            ref = load_reference(ds, scene, cfg.ig_points, seed)
+        return cls(scene, ref, num_worlds, cfg, seed, nthread=nthread)
+
+    @property
+    def obs_layout(self) -> dict[str, slice]:
+        """Name -> slice of the observation vector (``state``, ``goal<k>/<piece>``)."""
+        return self._obs_layout
+
+    # -- reset ---------------------------------------------------------------------------------------------
+    def reset(self, seed: int | None = None, start_frames: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
+        """Reset every world (reference state initialisation, or ``start_frames``)."""
+        if seed is not None:
+            self._gen.manual_seed(int(seed))
+        self._reset_worlds(torch.arange(self.num_worlds), start_frames)
+        return self._observe(), {}
+
+    def sample_start_frames(self, n: int) -> torch.Tensor:
+        """Frame 0 with probability ``reset_frame0_prob``, else uniform over [0, T - 2]."""
+        T = self.ref.num_frames
+        uniform = torch.randint(0, max(T - 1, 1), (n,), generator=self._gen)
+        zero = torch.rand(n, generator=self._gen) < self.cfg.reset_frame0_prob
+        return torch.where(zero, torch.zeros_like(uniform), uniform)
+
+    def _reset_worlds(self, ids: torch.Tensor, frames: torch.Tensor | None = None) -> None:
+        if ids.numel() == 0:
+            return
+        f = self.sample_start_frames(len(ids)) if frames is None else frames.to(torch.long)
+        r, sc = self.ref, self.scene
+        model = sc.model
+        qpos = np.tile(model.qpos0, (len(ids), 1))
+        qvel = np.zeros((len(ids), model.nv))
+        fn = f.numpy()
+        qpos[:, 0:3] = r.root_pos[fn].numpy()
+        qpos[:, 3:7] = r.root_quat[fn].numpy()
+        qpos[:, sc.hinge_qposadr.reshape(-1)] = r.joint_angles[fn].numpy()
+        qvel[:, 0:3] = r.root_linvel[fn].numpy()
+        qvel[:, 3:6] = r.root_angvel_local[fn].numpy()
+        qvel[:, sc.hinge_dofadr.reshape(-1)] = r.joint_vel[fn].numpy()
+        for j, o in enumerate(sc.dynamic_objects):
+            qpos[:, o.qposadr : o.qposadr + 3] = r.obj_pos[fn, j].numpy()
+            qpos[:, o.qposadr + 3 : o.qposadr + 7] = r.obj_quat[fn, j].numpy()
+            qvel[:, o.dofadr : o.dofadr + 3] = r.obj_linvel[fn, j].numpy()
+            qvel[:, o.dofadr + 3 : o.dofadr + 6] = r.obj_angvel_local[fn, j].numpy()
+        self.backend.set_state(ids.numpy(), qpos, qvel)
+        self.frame[ids] = f
+        self.start[ids] = f
+        self.steps[ids] = 0
+        self.lost.reset(ids)
+        self._prev_joint_vel[ids] = r.joint_vel[f]
+        self._prev_obj_vel[ids] = torch.cat([r.obj_linvel[f], r.obj_angvel[f]], -1)
+
+    # -- state ---------------------------------------------------------------------------------------------
+    def sim_state(self) -> SimState:
+        """The simulated state of every world, from the backend's sensors."""
+        sd = self.backend.sensordata
+        i = self._idx
+        t = lambda cols: torch.from_numpy(sd[:, cols]).to(torch.float32)  # noqa: E731
+        contact = t(i.contact)
+        force = contact[..., 1:]
+        obj_pos, obj_quat = t(i.obj_pos), t(i.obj_quat)
+        r = self.ref
+        points = (
+            quat_rotate(obj_quat[:, r.points_object], r.points_local[None].expand(self.num_worlds, -1, -1))
+            + obj_pos[:, r.points_object]
+        )
+        qvel = torch.from_numpy(self.backend.qvel[:, self.scene.hinge_dofadr.reshape(-1)]).to(torch.float32)
+        return SimState(
+            body_pos=t(i.body_pos),
+            body_quat=t(i.body_quat),
+            body_linvel=t(i.body_linvel),
+            body_angvel=t(i.body_angvel),
+            obj_pos=obj_pos,
+            obj_quat=obj_quat,
+            obj_linvel=t(i.obj_linvel),
+            obj_angvel=t(i.obj_angvel),
+            contact=(contact[..., 0] > 0) & (force.norm(dim=-1) > self.cfg.contact_force_threshold),
+            contact_force=force,
+            contact_obj=(t(i.touch) > 0).any(-1),
+            joint_vel=qvel,
+            points=points,
+        )
+
+    def ref_frame(self, frames: torch.Tensor) -> RefFrame:
+        r = self.ref
+        f = frames.clamp(0, r.num_frames - 1)
+        return RefFrame(r.body_pos[f], r.body_quat[f], r.obj_pos[f], r.obj_quat[f], r.points[f], r.labels[f], r.hand[f])
+
+    # -- observations --------------------------------------------------------------------------------------
+    def _observe(self, s: SimState | None = None) -> torch.Tensor:
+        s = s or self.sim_state()
+        inv_h = heading_inverse(s.body_quat[:, 0])
+        parts = {"state": state_obs(s, inv_h, self.all_bodies)}
+        for k in self.cfg.goal_horizons:
+            g = goal_obs(
+                s, self.ref_frame(self.frame + k), inv_h, self.tracked, self.rotated, self.goal_contact, self.hands
+            )
+            parts.update({f"goal{k}/{name}": v for name, v in g.items()})
+        if not self._obs_layout:
+            a = 0
+            for name, v in parts.items():
+                self._obs_layout[name] = slice(a, a + v.shape[1])
+                a += v.shape[1]
+            self.observation_size = a
+        return torch.cat(list(parts.values()), dim=1)
+
+    # -- step ----------------------------------------------------------------------------------------------
+    def action_to_ctrl(self, action: torch.Tensor) -> torch.Tensor:
+        """Actions in [-1, 1] -> PD targets (rad), clipped to the joint ranges."""
+        target = self._offset + self._scale * action.clamp(-1.0, 1.0)
+        return torch.maximum(torch.minimum(target, self._hi), self._lo)
+
+    def step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
+        """Advance every world one 30 Hz control step."""
+        self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(torch.float32)).numpy()
+        self.backend.step(self._ctrl, self.scene.config.substeps)
+        self.frame += 1
+        self.steps += 1
+        s = self.sim_state()
+        rf = self.ref_frame(self.frame)
+        reward, terms = self._reward(s, rf)
+        terminated, reason = self._terminations(s, rf)
+        T = self.ref.num_frames
+        truncated = ((self.frame >= T - 1) | (self.steps >= self.cfg.max_episode_frames)) & ~terminated
+        done = terminated | truncated
+        info = {
+            "terms": terms,
+            "termination_reason": reason,
+            "time_outs": truncated,
+            "episode_frames": self.steps.clone(),
+            "episode_start": self.start.clone(),
+            "frame": self.frame.clone(),
+        }
+        self._prev_joint_vel = s.joint_vel
+        self._prev_obj_vel = torch.cat([s.obj_linvel, s.obj_angvel], -1)
+        ids = torch.nonzero(done).flatten()
+        if ids.numel():
+            self._reset_worlds(ids)
+            s = None
+        return self._observe(s), reward, terminated, truncated, info
+
+    def _window(self) -> tuple[torch.Tensor, torch.Tensor]:
+        t_c = torch.full((self.num_worlds,), self.ref.t_c, dtype=torch.long)
+        ph = W.phase(self.frame, t_c, self.cfg.window)
+        return ph != W.OUTSIDE, ph
+
+    def _reward(self, s: SimState, rf: RefFrame) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        in_window, _ = self._window()
+        f = self.frame.clamp(0, self.ref.num_frames - 1)
+        sim_hand = torch.stack([s.contact_obj[:, self.hands[0]].any(1), s.contact_obj[:, self.hands[1]].any(1)], 1)
+        key = self.sets.key
+        x = RewardInputs(
+            body_pos=s.body_pos,
+            body_quat=s.body_quat,
+            ref_body_pos=rf.body_pos,
+            ref_body_quat=rf.body_quat,
+            ref_near_dist=self.ref.near_dist[f],
+            obj_pos=s.obj_pos,
+            obj_quat=s.obj_quat,
+            ref_obj_pos=rf.obj_pos,
+            ref_obj_quat=rf.obj_quat,
+            ig=s.body_pos[:, key, None] - s.points[:, None],
+            ref_ig=rf.body_pos[:, key, None] - rf.points[:, None],
+            contact_obj=s.contact_obj,
+            ref_labels=rf.labels,
+            ref_hand=rf.hand,
+            sim_hand=sim_hand,
+            joint_vel=s.joint_vel,
+            prev_joint_vel=self._prev_joint_vel,
+            obj_vel=torch.cat([s.obj_linvel, s.obj_angvel], -1),
+            prev_obj_vel=self._prev_obj_vel,
+            contact_force=s.contact_force,
+            in_window=in_window,
+            grasp_hands=self.ref.grasp_hands[None].expand(self.num_worlds, 2),
+            step=self.steps,
+            dt=self.scene.config.control_dt,
+        )
+        return compute_reward(x, self.sets, self.cfg)
+
+    def _terminations(self, s: SimState, rf: RefFrame) -> tuple[torch.Tensor, torch.Tensor]:
+        _, ph = self._window()
+        sim_hand = torch.stack([s.contact_obj[:, self.hands[0]].any(1), s.contact_obj[:, self.hands[1]].any(1)], 1)
+        lost = self.lost.update(rf.hand, sim_hand)
+        w = self.sets.wrists
+        x = TerminationInputs(
+            root_height=s.body_pos[:, 0, 2],
+            body_pos=s.body_pos,
+            ref_body_pos=rf.body_pos,
+            obj_points=s.points,
+            ref_obj_points=rf.points,
+            contact_lost=lost,
+            wrist_pos=s.body_pos[:, w],
+            ref_wrist_pos=rf.body_pos[:, w],
+            wrist_quat=s.body_quat[:, w],
+            ref_wrist_quat=rf.body_quat[:, w],
+            phase=ph,
+            grasp_hands=self.ref.grasp_hands[None].expand(self.num_worlds, 2),
+            step=self.steps,
+        )
+        return check_terminations(x, self.sets, self.cfg)
+
+    @staticmethod
+    def reason_name(code: int) -> str:
+        return REASONS.get(int(code), str(code))
+
+    def close(self) -> None:
+        self.backend.close()

@@ -1,0 +1,403 @@
+"""MuJoCo scene of one canonical sequence, built with ``MjSpec``.
+
+The humanoid comes from the MJCF stored in the canonical file, re-actuated for MuJoCo: its joint
+``stiffness``/``damping`` (Isaac Gym PD gains) become position actuators (kp, kv) with the paper's gains per
+body part, joint springs and damping are zeroed, armature 0.02, density 1000, finger ranges as InterMimic, and
+self-collision is off. Each dynamic object is a free body with one mesh geom per coacd hull and the stored
+mass/inertia (from the visual mesh, not the hull sum); static objects (real or inferred supports) are fixed at
+their frame-0 pose. Sensors give everything the environment observes, so a batch of worlds can be stepped by
+``mujoco.rollout`` with no Python per world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from wristmimic.errors import InputError
+from wristmimic.format.reader import Dataset, SequenceView
+from wristmimic.format.records import HumanoidRecord, ObjectRecord
+from wristmimic.humanoid.skeleton import Skeleton, load_skeleton
+
+# collision bits: humanoid geoms never collide with each other, everything else collides with everything
+HUMANOID_CONTYPE, HUMANOID_CONAFFINITY = 2, 1
+WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 3
+# contact sensor intprm = [data field bits, reduce mode, num] (MJCF data="found force", reduce="netforce")
+_DATA_FOUND, _DATA_FORCE = 1, 2
+_REDUCE_NONE, _REDUCE_NETFORCE = 0, 3
+FINGER_WIDE = np.deg2rad(55.625)
+FINGER_NARROW = np.deg2rad(5.625)
+FINGER_FLEX = np.deg2rad(90.0)
+
+
+@dataclass(frozen=True)
+class Gains:
+    """PD gains (stiffness N m/rad, damping N m s/rad) per body part (paper supplement)."""
+
+    legs: tuple[float, float] = (800.0, 80.0)
+    torso: tuple[float, float] = (1000.0, 100.0)
+    arms: tuple[float, float] = (500.0, 50.0)
+    toes: tuple[float, float] = (500.0, 50.0)
+    fingers: tuple[float, float] = (100.0, 10.0)
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """Physics settings of a scene. Timestep and substeps were chosen by ``tests/test_scene.py``: replaying
+    every shared reference through the PD controller stays finite and bounded."""
+
+    timestep: float = 1.0 / 120.0
+    substeps: int = 4
+    """Physics steps per 30 Hz control step."""
+    integrator: str = "implicitfast"
+    """Euler integrates the light fingers' actuator damping explicitly and explodes at dt >= 1/240."""
+    armature: float = 0.02
+    density: float = 1000.0
+    gains: Gains = field(default_factory=Gains)
+    object_damping: float = 0.01
+    """Linear/angular damping of dynamic objects (free-joint dof damping)."""
+    object_friction: float | None = None
+    """Sliding friction of object geoms; None: the URDF's lateral friction, else MuJoCo's default 1."""
+    max_hull_vertices: int = 64
+    floor: bool = True
+    visual_meshes: bool = True
+    """Add each object's visual mesh as a non-colliding geom (group 2) for viewers."""
+
+    @property
+    def control_dt(self) -> float:
+        return self.timestep * self.substeps
+
+
+@dataclass
+class SceneObject:
+    """An object of the scene and where it lives in the model."""
+
+    id: str
+    record: ObjectRecord
+    dynamic: bool
+    body_id: int
+    qposadr: int = -1
+    dofadr: int = -1
+
+
+@dataclass
+class Scene:
+    """A compiled scene and the index maps the environment needs."""
+
+    spec: mujoco.MjSpec
+    model: mujoco.MjModel
+    config: SceneConfig
+    sequence_id: str
+    humanoid: HumanoidRecord
+    skeleton: Skeleton
+    body_ids: np.ndarray  # (B,) model body id of each humanoid body
+    hinge_qposadr: np.ndarray  # (J, 3)
+    hinge_dofadr: np.ndarray  # (J, 3)
+    actuator_ids: np.ndarray  # (J, 3) actuator of each hinge (ctrl index)
+    ctrl_range: np.ndarray  # (J*3, 2)
+    objects: list[SceneObject]
+    sensors: dict[str, slice]  # name -> slice of sensordata
+    gains: np.ndarray  # (J*3, 2) kp, kv per hinge
+
+    @property
+    def dynamic_objects(self) -> list[SceneObject]:
+        return [o for o in self.objects if o.dynamic]
+
+    @cached_property
+    def nstate(self) -> int:
+        return mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+
+    def to_xml(self) -> str:
+        """The scene as MJCF text (meshes inline), for inspection."""
+        return self.spec.to_xml()
+
+
+def gain_groups(skel: Skeleton, roles: dict[str, np.ndarray]) -> dict[str, list[int]]:
+    """Body indices per gain group, from the tree: fingers, toes (foot leaves), legs (ancestors of the feet),
+    torso (ancestors of the head's parent, root excluded), arms (every other non-root body)."""
+    fingers = set(roles["fingers"].tolist())
+    feet = set(roles["feet"].tolist())
+    toes = {b for b in feet if not skel.children(b)}
+    legs: set[int] = set()
+    for f in feet - toes:
+        b = f
+        while b > 0:
+            legs.add(b)
+            b = int(skel.parents[b])
+    head = int(roles["head"][0])
+    torso: set[int] = set()
+    b = int(skel.parents[int(skel.parents[head])])  # skip the neck
+    while b > 0:
+        torso.add(b)
+        b = int(skel.parents[b])
+    arms = set(range(1, skel.num_bodies)) - fingers - toes - legs - torso
+    return {
+        k: sorted(v) for k, v in {"fingers": fingers, "toes": toes, "legs": legs, "torso": torso, "arms": arms}.items()
+    }
+
+
+def finger_ranges(skel: Skeleton, roles: dict[str, np.ndarray]) -> dict[int, np.ndarray]:
+    """InterMimic finger joint ranges (rad, (3, 2) per finger body), by position along each finger chain.
+
+    Segment 1 and 2: x +-55.625 deg, y/z +-5.625; segment 3: x [-90, 5.625] (left) / [-5.625, 90] (right),
+    y/z +-5.625. Thumb: segment 1 xyz +-55.625, segment 2 +-5.625. A chain of four (ParaHome: CMC, MCP, PIP,
+    DIP) starts with a metacarpal kept near-rigid (+-5.625) and continues as segments 1..3.
+    """
+    wide, narrow = FINGER_WIDE, FINGER_NARROW
+    out: dict[int, np.ndarray] = {}
+    for side, sign in (("left", -1.0), ("right", 1.0)):
+        wrist = int(roles["wrists"][0 if side == "left" else 1])
+        for start in skel.children(wrist):
+            chain = [start]
+            while skel.children(chain[-1]):
+                chain.append(skel.children(chain[-1])[0])
+            name = skel.body_names[start]
+            thumb = "Thumb" in name or "First" in name
+            if len(chain) == 4 or (thumb and len(chain) == 3 and "CMC" in name):
+                out[chain[0]] = np.array([[-narrow, narrow]] * 3)
+                chain = chain[1:] if len(chain) == 4 else chain
+            for k, b in enumerate(chain, start=1):
+                if k >= 3:
+                    flex = [-FINGER_FLEX, narrow] if sign < 0 else [-narrow, FINGER_FLEX]
+                    out[b] = np.array([flex, [-narrow, narrow], [-narrow, narrow]])
+                elif thumb and k == 1:
+                    out[b] = np.array([[-wide, wide]] * 3)
+                elif thumb:
+                    out[b] = np.array([[-narrow, narrow]] * 3)
+                else:
+                    out[b] = np.array([[-wide, wide], [-narrow, narrow], [-narrow, narrow]])
+    return out
+
+
+def _strip_source_extras(spec: mujoco.MjSpec) -> None:
+    """Drop the source's actuators, world geoms (floor) and sensors: the scene adds its own."""
+    for a in list(spec.actuators):
+        spec.delete(a)
+    for s in list(spec.sensors):
+        spec.delete(s)
+    for g in list(spec.worldbody.geoms):
+        spec.delete(g)
+
+
+def _humanoid(spec: mujoco.MjSpec, skel: Skeleton, roles: dict[str, np.ndarray], cfg: SceneConfig) -> np.ndarray:
+    """Re-actuate the humanoid in ``spec``; returns (J*3, 2) gains in hinge order."""
+    groups = gain_groups(skel, roles)
+    gain_of = {b: getattr(cfg.gains, g) for g, bodies in groups.items() for b in bodies}
+    franges = finger_ranges(skel, roles)
+    gains = []
+    for j, b in enumerate(skel.joint_bodies):
+        body = spec.body(skel.body_names[b])
+        kp, kv = gain_of[int(b)]
+        hinges = [jt for jt in body.joints if jt.type == mujoco.mjtJoint.mjJNT_HINGE]
+        for k, jt in enumerate(hinges):
+            jt.stiffness = np.zeros_like(np.asarray(jt.stiffness))
+            jt.damping = np.zeros_like(np.asarray(jt.damping))
+            jt.armature = cfg.armature
+            rng = franges[int(b)][k] if int(b) in franges else skel.joint_range[j, k]
+            jt.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+            jt.range = np.rad2deg(rng) if spec.compiler.degree else rng  # spec ranges use the MJCF angle unit
+            act = spec.add_actuator(name=f"pd_{jt.name}", target=jt.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            act.set_to_position(kp=kp, kv=kv)
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.ctrlrange = rng
+            gains.append((kp, kv))
+    for body in spec.bodies:
+        for g in body.geoms:
+            g.density = cfg.density
+            g.contype, g.conaffinity = HUMANOID_CONTYPE, HUMANOID_CONAFFINITY
+    return np.asarray(gains, dtype=np.float64)
+
+
+def _add_object(
+    spec: mujoco.MjSpec, oid: str, rec: ObjectRecord, dynamic: bool, pos: np.ndarray, quat: np.ndarray, cfg: SceneConfig
+) -> None:
+    body = spec.worldbody.add_body(name=f"obj_{oid}", pos=pos, quat=quat)
+    friction = cfg.object_friction if cfg.object_friction is not None else rec.urdf.get("lateral_friction")
+    if dynamic:
+        fj = body.add_freejoint(name=f"obj_{oid}")
+        fj.damping = [cfg.object_damping, 0.0, 0.0]
+        body.explicitinertial = True
+        body.mass = float(rec.mass)
+        body.ipos = np.asarray(rec.com, float)
+        body.fullinertia = np.asarray(rec.inertia, float)[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
+    for k, (v, f) in enumerate(rec.hulls()):
+        mesh = spec.add_mesh(
+            name=f"{oid}_hull{k}",
+            uservert=np.asarray(v, np.float32).ravel(),
+            userface=np.asarray(f, np.int32).ravel(),
+            maxhullvert=cfg.max_hull_vertices,
+            inertia=mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX,
+        )
+        g = body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=mesh.name,
+            name=f"{oid}_hull{k}",
+            density=0.0,
+            contype=WORLD_CONTYPE,
+            conaffinity=WORLD_CONAFFINITY,
+            group=3,
+            rgba=[0.4, 0.6, 0.9, 0.3],
+        )
+        if friction is not None:
+            g.friction = [float(friction), 0.005, 0.0001]
+    if cfg.visual_meshes and not rec.inferred:
+        mesh = spec.add_mesh(
+            name=f"{oid}_visual",
+            uservert=np.asarray(rec.vertices, np.float32).ravel(),
+            userface=np.asarray(rec.faces, np.int32).ravel(),
+            inertia=mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL,
+        )
+        body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=mesh.name,
+            name=f"{oid}_visual",
+            density=0.0,
+            contype=0,
+            conaffinity=0,
+            group=2,
+            rgba=[0.8, 0.7, 0.5, 1.0],
+        )
+
+
+def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None) -> Scene:
+    """Build the MuJoCo scene of ``sequence_id`` from an open canonical file."""
+    cfg = config or SceneConfig()
+    seq: SequenceView = ds.sequence(sequence_id)
+    hum = ds.humanoid(seq.humanoid_id)
+    skel = load_skeleton(hum.mjcf, f"{ds.path}:humanoids/{seq.humanoid_id}")
+    spec = mujoco.MjSpec.from_string(hum.mjcf)
+    spec.modelname = f"wristmimic_{sequence_id}"
+    _strip_source_extras(spec)
+    spec.option.timestep = cfg.timestep
+    spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{cfg.integrator.upper()}")
+    gains = _humanoid(spec, skel, hum.roles, cfg)
+    if cfg.floor:
+        spec.worldbody.add_geom(
+            name="floor",
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[50, 50, 0.1],
+            contype=WORLD_CONTYPE,
+            conaffinity=WORLD_CONAFFINITY,
+            rgba=[0.8, 0.9, 0.8, 1],
+        )
+    obj_pos = seq.array("object_pos", slice(0, 1))[0]
+    obj_quat = seq.array("object_quat", slice(0, 1))[0]
+    records = {oid: ds.object(oid) for oid in seq.object_ids}
+    dyn = [oid for oid in seq.object_ids if not records[oid].static]
+    for k, oid in enumerate(seq.object_ids):
+        _add_object(spec, oid, records[oid], oid in dyn, obj_pos[k], obj_quat[k], cfg)
+    _add_sensors(spec, skel, dyn)
+    spec.add_numeric(name="wristmimic_control_substeps", data=[float(cfg.substeps)])
+    spec.add_text(name="wristmimic_sequence", data=sequence_id)
+    try:
+        model = spec.compile()
+    except Exception as exc:  # noqa: BLE001 - MuJoCo raises ValueError with the compiler's message
+        raise InputError(ds.path, f"sequences/{sequence_id}", f"scene does not compile: {str(exc)[:200]}") from None
+    return _index(spec, model, cfg, sequence_id, hum, skel, records, dyn, gains)
+
+
+def _add_sensors(spec: mujoco.MjSpec, skel: Skeleton, dyn: list[str]) -> None:
+    frames = [*skel.body_names, *(f"obj_{o}" for o in dyn)]
+    kinds = (
+        ("pos", mujoco.mjtSensor.mjSENS_FRAMEPOS),
+        ("quat", mujoco.mjtSensor.mjSENS_FRAMEQUAT),
+        ("linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
+        ("angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL),
+    )
+    for kind, st in kinds:
+        for name in frames:
+            # XBODY = the body frame (BODY would be its inertial frame)
+            spec.add_sensor(name=f"{kind}:{name}", type=st, objtype=mujoco.mjtObj.mjOBJ_XBODY, objname=name)
+    for name in skel.body_names:
+        s = spec.add_sensor(
+            name=f"contact:{name}", type=mujoco.mjtSensor.mjSENS_CONTACT, objtype=mujoco.mjtObj.mjOBJ_BODY, objname=name
+        )
+        s.intprm = [_DATA_FOUND | _DATA_FORCE, _REDUCE_NETFORCE, 1]
+        for o in dyn:
+            s = spec.add_sensor(
+                name=f"touch:{name}:{o}",
+                type=mujoco.mjtSensor.mjSENS_CONTACT,
+                objtype=mujoco.mjtObj.mjOBJ_BODY,
+                objname=name,
+                reftype=mujoco.mjtObj.mjOBJ_BODY,
+                refname=f"obj_{o}",
+            )
+            s.intprm = [_DATA_FOUND, _REDUCE_NONE, 1]
+
+
+def _index(
+    spec: mujoco.MjSpec,
+    model: mujoco.MjModel,
+    cfg: SceneConfig,
+    sid: str,
+    hum: HumanoidRecord,
+    skel: Skeleton,
+    records: dict[str, ObjectRecord],
+    dyn: list[str],
+    gains: np.ndarray,
+) -> Scene:
+    name2id = lambda t, n: mujoco.mj_name2id(model, t, n)  # noqa: E731
+    body_ids = np.array([name2id(mujoco.mjtObj.mjOBJ_BODY, n) for n in skel.body_names])
+    jnames = [[f"{skel.body_names[b]}_{a}" for a in "xyz"] for b in skel.joint_bodies]
+    jids = np.array([[name2id(mujoco.mjtObj.mjOBJ_JOINT, n) for n in row] for row in jnames])
+    hinge_ids = np.array(
+        [
+            [j for j in np.flatnonzero(model.jnt_bodyid == bid) if model.jnt_type[j] == 3]
+            for bid in body_ids[skel.joint_bodies]
+        ]
+    )
+    if (jids < 0).any():
+        jids = hinge_ids
+    act = np.array(
+        [
+            [
+                name2id(mujoco.mjtObj.mjOBJ_ACTUATOR, f"pd_{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}")
+                for j in row
+            ]
+            for row in jids
+        ]
+    )
+    objects = []
+    for oid, rec in records.items():
+        bid = name2id(mujoco.mjtObj.mjOBJ_BODY, f"obj_{oid}")
+        o = SceneObject(oid, rec, oid in dyn, bid)
+        if o.dynamic:
+            j = model.body_jntadr[bid]
+            o.qposadr, o.dofadr = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j])
+        objects.append(o)
+    sensors = {}
+    for i in range(model.nsensor):
+        a = int(model.sensor_adr[i])
+        sensors[mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SENSOR, i)] = slice(a, a + int(model.sensor_dim[i]))
+    return Scene(
+        spec=spec,
+        model=model,
+        config=cfg,
+        sequence_id=sid,
+        humanoid=hum,
+        skeleton=skel,
+        body_ids=body_ids,
+        hinge_qposadr=model.jnt_qposadr[jids],
+        hinge_dofadr=model.jnt_dofadr[jids],
+        actuator_ids=act,
+        ctrl_range=model.actuator_ctrlrange[act.ravel()].copy(),
+        objects=objects,
+        sensors=sensors,
+        gains=gains,
+    )
+
+
+def export_scene_xml(ds_path: str | Path, sequence_id: str, out: str | Path, config: SceneConfig | None = None) -> Path:
+    """Write the scene of one sequence as MJCF (atomic)."""
+    from wristmimic.format.reader import open_dataset
+    from wristmimic.safe_io import atomic_output
+
+    with open_dataset(ds_path) as ds:
+        scene = build_scene(ds, sequence_id, config)
+    with atomic_output(out) as tmp:
+        tmp.write_text(scene.to_xml())
+    return Path(out)
