@@ -54,7 +54,8 @@ def _ident(*shape: int) -> torch.Tensor:
 
 def toy_inputs() -> RewardInputs:
     """World 0 outside the window, world 1 inside with the left hand grasping, world 2 inside with both."""
-    ig = torch.randn(N, 7, 4, 3, generator=torch.Generator().manual_seed(0))
+    g = torch.Generator().manual_seed(0)
+    ig_pos, points = torch.randn(N, 7, 3, generator=g), torch.randn(N, 4, 3, generator=g)
     labels = torch.zeros(N, B, dtype=torch.int8)
     labels[0, [1, 7]] = 1
     labels[0, 2] = -1
@@ -78,8 +79,10 @@ def toy_inputs() -> RewardInputs:
         obj_quat=_zrot([0.6, 0.0]).expand(N, 2, 4).clone(),
         ref_obj_pos=torch.tensor([[1.0, 0.0, 0.5], [0.0, 1.0, 0.0]]).expand(N, 2, 3).clone(),
         ref_obj_quat=_ident(N, 2),
-        ig=ig,
-        ref_ig=ig.clone(),
+        ig_pos=ig_pos,
+        ref_ig_pos=ig_pos.clone(),
+        points=points,
+        ref_points=points.clone(),
         contact_obj=contact,
         ref_labels=labels,
         ref_hand=torch.tensor([[True, True], [True, False], [False, False]]),
@@ -225,8 +228,11 @@ def test_weights_come_from_config() -> None:
 
 def test_ig_small_case_by_hand() -> None:
     x = toy_inputs()
-    x.ig = torch.tensor([[1.0, 0, 0], [0, 0.05, 0]]).reshape(1, 1, 2, 3)
-    x.ref_ig = torch.tensor([[0.5, 0, 0], [0, 0.05, 0]]).reshape(1, 1, 2, 3)
+    # one node at the origin; ig = node - point
+    x.ig_pos, x.ref_ig_pos = torch.zeros(1, 1, 3), torch.zeros(1, 1, 3)
+    x.points = -torch.tensor([[1.0, 0, 0], [0, 0.05, 0]]).reshape(1, 2, 3)
+    x.ref_points = -torch.tensor([[0.5, 0, 0], [0, 0.05, 0]]).reshape(1, 2, 3)
+    x.body_pos = x.body_pos[:1]
     # w1 = [1, 1/max(.0025, .01)] = [1, 100] / 101; w2 = [4, 100] / 104; only pair 0 differs (.25)
     expected = 0.5 * 0.25 * (1 / 101 + 4 / 104)
     assert error_ig(x).item() == pytest.approx(expected, rel=1e-5)
@@ -236,10 +242,14 @@ def test_ig_matches_a_brute_force_loop() -> None:
     g = torch.Generator().manual_seed(3)
     x = toy_inputs()
     n, k, p = 2, 3, 5
-    x.ig = torch.randn(n, k, p, 3, generator=g) * 0.5
-    x.ig[0, 1, 2] = torch.tensor([0.01, 0.0, 0.02])  # below the 0.1 m clamp
-    x.ref_ig = x.ig + torch.randn(n, k, p, 3, generator=g) * 0.1
-    ig, ref = x.ig.double().numpy(), x.ref_ig.double().numpy()
+    x.ig_pos = torch.randn(n, k, 3, generator=g) * 0.5
+    x.points = torch.randn(n, p, 3, generator=g) * 0.5
+    x.points[0, 2] = x.ig_pos[0, 1] - torch.tensor([0.01, 0.0, 0.02])  # a pair below the 0.1 m clamp
+    x.ref_ig_pos = x.ig_pos + torch.randn(n, k, 3, generator=g) * 0.1
+    x.ref_points = x.points + torch.randn(n, p, 3, generator=g) * 0.1
+    x.body_pos = x.body_pos[:n]
+    ig = (x.ig_pos[:, :, None] - x.points[:, None]).double().numpy()
+    ref = (x.ref_ig_pos[:, :, None] - x.ref_points[:, None]).double().numpy()
     expected = []
     for i in range(n):
         w1 = np.zeros((k, p))

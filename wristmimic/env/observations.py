@@ -48,6 +48,7 @@ class RefFrame:
     points: torch.Tensor  # (N, P, 3)
     labels: torch.Tensor  # (N, B) int8
     hand: torch.Tensor  # (N, 2) bool
+    near_vec: torch.Tensor  # (N, B, 3) each body minus its nearest object surface point
 
 
 def _frame(v: torch.Tensor, inv_heading: torch.Tensor) -> torch.Tensor:
@@ -84,11 +85,14 @@ def ig_feature(v: torch.Tensor, decay: float = 5.0) -> torch.Tensor:
     return v / n * torch.exp(-decay * n)
 
 
-def state_obs(s: SimState, inv_heading: torch.Tensor, contact_bodies: torch.Tensor) -> torch.Tensor:
-    """Proprioceptive state, (N, 1 + 3(B-1) + 6B + 3B + 3B + C + 15 O + 3B)."""
+def state_obs(
+    s: SimState, near_vec: torch.Tensor, inv_heading: torch.Tensor, contact_bodies: torch.Tensor
+) -> torch.Tensor:
+    """Proprioceptive state, (N, 1 + 3(B-1) + 6B + 3B + 3B + C + 15 O + 3B); ``near_vec`` (N, B, 3) is
+    :func:`nearest_vectors` of the bodies."""
     root = s.body_pos[:, 0]
     rel = _frame(s.body_pos[:, 1:] - root[:, None], inv_heading)
-    ig = ig_feature(_frame(nearest_vectors(s.body_pos, s.points), inv_heading))
+    ig = ig_feature(_frame(near_vec, inv_heading))
     obj_rel = _frame(s.obj_pos - root[:, None], inv_heading)
     parts = [
         root[:, 2:3],  # 1 root height
@@ -108,6 +112,7 @@ def state_obs(s: SimState, inv_heading: torch.Tensor, contact_bodies: torch.Tens
 
 def goal_obs(
     s: SimState,
+    near_vec: torch.Tensor,
     r: RefFrame,
     inv_heading: torch.Tensor,
     tracked: torch.Tensor,
@@ -115,10 +120,11 @@ def goal_obs(
     contact_bodies: torch.Tensor,
     hands: tuple[torch.Tensor, torch.Tensor],
 ) -> dict[str, torch.Tensor]:
-    """Goal block for one horizon as named pieces (their concatenation is the observation)."""
+    """Goal block for one horizon as named pieces (their concatenation is the observation); ``near_vec``
+    (N, B, 3) is :func:`nearest_vectors` of the simulated bodies."""
     root = s.body_pos[:, 0]
-    sim_ig = ig_feature(nearest_vectors(s.body_pos[:, tracked], s.points))
-    ref_ig = ig_feature(nearest_vectors(r.body_pos[:, tracked], r.points))
+    sim_ig = ig_feature(near_vec[:, tracked])
+    ref_ig = ig_feature(r.near_vec[:, tracked])
     label = r.labels[:, contact_bodies].float()
     sim_hand = torch.stack([s.contact_obj[:, hands[0]].any(1), s.contact_obj[:, hands[1]].any(1)], 1)
     return {

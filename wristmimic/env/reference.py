@@ -58,6 +58,7 @@ class Reference:
     labels: torch.Tensor  # (T, B) int8
     hand: torch.Tensor  # (T, 2) bool
     near_dist: torch.Tensor  # (T, B) distance of each body to the nearest object surface point
+    near_vec: torch.Tensor  # (T, B, 3) each body minus its nearest object surface point
     points_local: torch.Tensor  # (P, 3) surface points of the dynamic objects, each in its object's frame
     points_object: torch.Tensor  # (P,) long: which dynamic object each point belongs to
     points: torch.Tensor  # (T, P, 3) the same points posed in the world
@@ -94,10 +95,11 @@ def load_reference(ds: Dataset, scene: Scene, ig_points: int = 1024, seed: int =
     )
     body_pos = s.body_pos.astype(np.float64)
     if len(local):
-        near = np.stack(
-            [np.linalg.norm(body_pos[t, :, None] - world[t, None], axis=-1).min(-1) for t in range(s.num_frames)]
-        )
+        diff = [body_pos[t, :, None] - world[t, None] for t in range(s.num_frames)]  # (B, P, 3) per frame
+        near_vec = np.stack([d[np.arange(len(d)), np.linalg.norm(d, axis=-1).argmin(-1)] for d in diff])
+        near = np.linalg.norm(near_vec, axis=-1)
     else:
+        near_vec = np.zeros(body_pos.shape)
         near = np.full(body_pos.shape[:2], np.inf)
     first = s.first_contact_frame.astype(np.int64)
     grasp = first >= 0
@@ -128,6 +130,7 @@ def load_reference(ds: Dataset, scene: Scene, ig_points: int = 1024, seed: int =
         labels=torch.as_tensor(s.contact_labels, dtype=torch.int8),
         hand=torch.as_tensor(s.hand_contact, dtype=torch.bool),
         near_dist=f32(near),
+        near_vec=f32(near_vec),
         points_local=f32(local),
         points_object=torch.as_tensor(owner_a, dtype=torch.long),
         points=f32(world),

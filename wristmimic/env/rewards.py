@@ -48,8 +48,10 @@ class RewardInputs:
     obj_quat: torch.Tensor  # (N, O, 4)
     ref_obj_pos: torch.Tensor  # (N, O, 3)
     ref_obj_quat: torch.Tensor  # (N, O, 4)
-    ig: torch.Tensor  # (N, K, P, 3) simulated key-body position minus simulated object surface point
-    ref_ig: torch.Tensor  # (N, K, P, 3) the same for the reference
+    ig_pos: torch.Tensor  # (N, K, 3) simulated key-body positions (interaction-graph nodes)
+    ref_ig_pos: torch.Tensor  # (N, K, 3) the same in the reference
+    points: torch.Tensor  # (N, P, 3) simulated object surface points (all dynamic objects)
+    ref_points: torch.Tensor  # (N, P, 3) the same in the reference
     contact_obj: torch.Tensor  # (N, B) bool: simulated body touches a dynamic object
     ref_labels: torch.Tensor  # (N, B) int8 in {-1, 0, 1}: reference contact labels
     ref_hand: torch.Tensor  # (N, 2) bool: reference hand [left, right] in contact
@@ -144,13 +146,25 @@ def error_obj_rot(x: RewardInputs) -> torch.Tensor:
     return _mean(quat_angle(x.ref_obj_quat, x.obj_quat), (1,))
 
 
+def sq_dists(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """(N, K, 3), (N, P, 3) -> (N, K, P) squared distances, without materialising (N, K, P, 3)."""
+    d = a.square().sum(-1)[:, :, None] + b.square().sum(-1)[:, None, :] - 2.0 * torch.bmm(a, b.transpose(1, 2))
+    return d.clamp_min(0.0)
+
+
 def error_ig(x: RewardInputs, min_sq: float = CONSTANTS.ig_min_sq_dist) -> torch.Tensor:
-    """E_ig = 0.5 sum_kp |ig - ig_ref|^2 (w1 + w2), w = 1/max(|ig|^2, min_sq) normalised over all pairs."""
-    w1 = 1.0 / x.ig.square().sum(-1).clamp_min(min_sq)
-    w2 = 1.0 / x.ref_ig.square().sum(-1).clamp_min(min_sq)
-    w1 = w1 / w1.sum((1, 2), keepdim=True)
-    w2 = w2 / w2.sum((1, 2), keepdim=True)
-    return 0.5 * ((x.ig - x.ref_ig).square().sum(-1) * (w1 + w2)).sum((1, 2))
+    """E_ig = 0.5 sum_kp |ig - ig_ref|^2 (w1 + w2), w = 1/max(|ig|^2, min_sq) normalised over all pairs.
+
+    With ig_kp = x_k - p_p: ig - ig_ref = (x_k - x_ref_k) - (p_p - p_ref_p), so every term is a pairwise
+    squared distance (N, K, P) computed by one batched matmul each (InterMimic's dense all-pairs graph).
+    """
+    if x.points.shape[1] == 0:
+        return torch.zeros(x.body_pos.shape[0], dtype=x.body_pos.dtype, device=x.body_pos.device)
+    w1 = 1.0 / sq_dists(x.ig_pos, x.points).clamp_min(min_sq)
+    w2 = 1.0 / sq_dists(x.ref_ig_pos, x.ref_points).clamp_min(min_sq)
+    w = w1 / w1.sum((1, 2), keepdim=True) + w2 / w2.sum((1, 2), keepdim=True)
+    e = sq_dists(x.ig_pos - x.ref_ig_pos, x.points - x.ref_points)
+    return 0.5 * (e * w).sum((1, 2))
 
 
 def error_contact_hand(x: RewardInputs) -> torch.Tensor:

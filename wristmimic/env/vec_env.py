@@ -21,7 +21,7 @@ import torch
 from wristmimic.env import window as W
 from wristmimic.env.bodies import BodySets
 from wristmimic.env.config import EnvConfig
-from wristmimic.env.observations import RefFrame, SimState, goal_obs, heading_inverse, state_obs
+from wristmimic.env.observations import RefFrame, SimState, goal_obs, heading_inverse, nearest_vectors, state_obs
 from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import RewardInputs, compute_reward
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
@@ -91,6 +91,8 @@ class WristMimicEnv:
         self.backend = backend or CpuRolloutBackend(scene.model, self.num_worlds, nthread)
         self.sets = BodySets.from_roles(scene.humanoid.roles)
         self._idx = _sensor_index(scene)
+        self._tidx = {k: torch.as_tensor(v, dtype=torch.long) for k, v in self._idx.__dict__.items()}
+        self._hinge_dof = scene.hinge_dofadr.reshape(-1)
         self._gen = torch.Generator().manual_seed(self.seed)
         N = self.num_worlds
         self.frame = torch.zeros(N, dtype=torch.long)
@@ -192,30 +194,26 @@ class WristMimicEnv:
     # -- state ---------------------------------------------------------------------------------------------
     def sim_state(self) -> SimState:
         """The simulated state of every world, from the backend's sensors."""
-        sd = self.backend.sensordata
-        i = self._idx
-        t = lambda cols: torch.from_numpy(sd[:, cols]).to(torch.float32)  # noqa: E731
-        contact = t(i.contact)
+        sd = torch.from_numpy(self.backend.sensordata).to(torch.float32)  # one conversion, then views
+        i = self._tidx
+        contact = sd[:, i["contact"]]
         force = contact[..., 1:]
-        obj_pos, obj_quat = t(i.obj_pos), t(i.obj_quat)
+        obj_pos, obj_quat = sd[:, i["obj_pos"]], sd[:, i["obj_quat"]]
         r = self.ref
-        points = (
-            quat_rotate(obj_quat[:, r.points_object], r.points_local[None].expand(self.num_worlds, -1, -1))
-            + obj_pos[:, r.points_object]
-        )
-        qvel = torch.from_numpy(self.backend.qvel[:, self.scene.hinge_dofadr.reshape(-1)]).to(torch.float32)
+        points = quat_rotate(obj_quat[:, r.points_object], r.points_local) + obj_pos[:, r.points_object]
+        qvel = torch.from_numpy(self.backend.qvel[:, self._hinge_dof]).to(torch.float32)
         return SimState(
-            body_pos=t(i.body_pos),
-            body_quat=t(i.body_quat),
-            body_linvel=t(i.body_linvel),
-            body_angvel=t(i.body_angvel),
+            body_pos=sd[:, i["body_pos"]],
+            body_quat=sd[:, i["body_quat"]],
+            body_linvel=sd[:, i["body_linvel"]],
+            body_angvel=sd[:, i["body_angvel"]],
             obj_pos=obj_pos,
             obj_quat=obj_quat,
-            obj_linvel=t(i.obj_linvel),
-            obj_angvel=t(i.obj_angvel),
+            obj_linvel=sd[:, i["obj_linvel"]],
+            obj_angvel=sd[:, i["obj_angvel"]],
             contact=(contact[..., 0] > 0) & (force.norm(dim=-1) > self.cfg.contact_force_threshold),
             contact_force=force,
-            contact_obj=(t(i.touch) > 0).any(-1),
+            contact_obj=(sd[:, i["touch"]] > 0).any(-1),
             joint_vel=qvel,
             points=points,
         )
@@ -223,16 +221,33 @@ class WristMimicEnv:
     def ref_frame(self, frames: torch.Tensor) -> RefFrame:
         r = self.ref
         f = frames.clamp(0, r.num_frames - 1)
-        return RefFrame(r.body_pos[f], r.body_quat[f], r.obj_pos[f], r.obj_quat[f], r.points[f], r.labels[f], r.hand[f])
+        return RefFrame(
+            r.body_pos[f],
+            r.body_quat[f],
+            r.obj_pos[f],
+            r.obj_quat[f],
+            r.points[f],
+            r.labels[f],
+            r.hand[f],
+            r.near_vec[f],
+        )
 
     # -- observations --------------------------------------------------------------------------------------
     def _observe(self, s: SimState | None = None) -> torch.Tensor:
         s = s or self.sim_state()
         inv_h = heading_inverse(s.body_quat[:, 0])
-        parts = {"state": state_obs(s, inv_h, self.all_bodies)}
+        near = nearest_vectors(s.body_pos, s.points)  # one (N, B, P) distance query per step
+        parts = {"state": state_obs(s, near, inv_h, self.all_bodies)}
         for k in self.cfg.goal_horizons:
             g = goal_obs(
-                s, self.ref_frame(self.frame + k), inv_h, self.tracked, self.rotated, self.goal_contact, self.hands
+                s,
+                near,
+                self.ref_frame(self.frame + k),
+                inv_h,
+                self.tracked,
+                self.rotated,
+                self.goal_contact,
+                self.hands,
             )
             parts.update({f"goal{k}/{name}": v for name, v in g.items()})
         if not self._obs_layout:
@@ -298,8 +313,10 @@ class WristMimicEnv:
             obj_quat=s.obj_quat,
             ref_obj_pos=rf.obj_pos,
             ref_obj_quat=rf.obj_quat,
-            ig=s.body_pos[:, key, None] - s.points[:, None],
-            ref_ig=rf.body_pos[:, key, None] - rf.points[:, None],
+            ig_pos=s.body_pos[:, key],
+            ref_ig_pos=rf.body_pos[:, key],
+            points=s.points,
+            ref_points=rf.points,
             contact_obj=s.contact_obj,
             ref_labels=rf.labels,
             ref_hand=rf.hand,
