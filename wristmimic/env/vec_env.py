@@ -355,6 +355,44 @@ class WristMimicEnv:
         )
         return check_terminations(x, self.sets, self.cfg)
 
+    # -- checkpointing -------------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, object]:
+        """Everything needed to continue bit-for-bit: physics state of every world, episode bookkeeping and
+        the generator of start frames."""
+        return {
+            "physics": torch.from_numpy(self.backend.state.copy()),
+            "sensordata": torch.from_numpy(self.backend.sensordata.copy()),
+            "frame": self.frame.clone(),
+            "start": self.start.clone(),
+            "steps": self.steps.clone(),
+            "contact_lost": self.lost.counts.clone(),
+            "prev_joint_vel": self._prev_joint_vel.clone(),
+            "prev_obj_vel": self._prev_obj_vel.clone(),
+            "generator": self._gen.get_state(),
+            "sequence_id": self.scene.sequence_id,
+            "num_worlds": self.num_worlds,
+        }
+
+    def load_state_dict(self, state: dict[str, object]) -> None:
+        """Restore :meth:`state_dict` (same scene and number of worlds)."""
+        if state["sequence_id"] != self.scene.sequence_id or state["num_worlds"] != self.num_worlds:
+            raise ValueError(
+                f"checkpoint is for {state['sequence_id']} x {state['num_worlds']} worlds, this environment is "
+                f"{self.scene.sequence_id} x {self.num_worlds}"
+            )
+        self.backend.load(state["physics"].numpy(), state["sensordata"].numpy())  # type: ignore[union-attr]
+        self.frame[:] = state["frame"]  # type: ignore[index]
+        self.start[:] = state["start"]  # type: ignore[index]
+        self.steps[:] = state["steps"]  # type: ignore[index]
+        self.lost.counts[:] = state["contact_lost"]  # type: ignore[index]
+        self._prev_joint_vel[:] = state["prev_joint_vel"]  # type: ignore[index]
+        self._prev_obj_vel[:] = state["prev_obj_vel"]  # type: ignore[index]
+        self._gen.set_state(state["generator"])  # type: ignore[arg-type]
+
+    def observe(self) -> torch.Tensor:
+        """The current observation of every world (e.g. after :meth:`load_state_dict`)."""
+        return self._observe()
+
     @staticmethod
     def reason_name(code: int) -> str:
         return REASONS.get(int(code), str(code))

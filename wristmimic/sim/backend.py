@@ -31,6 +31,12 @@ class PhysicsBackend(Protocol):
     @property
     def sensordata(self) -> np.ndarray: ...  # (N, nsensordata)
 
+    @property
+    def state(self) -> np.ndarray: ...  # (N, nstate) full physics state
+
+    def load(self, state: np.ndarray, sensordata: np.ndarray) -> None:
+        """Restore a saved (state, sensordata) pair of every world."""
+
     def set_state(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Put worlds ``ids`` in the given state and evaluate their sensors there (no time passes)."""
 
@@ -81,6 +87,16 @@ class CpuRolloutBackend:
     @property
     def sensordata(self) -> np.ndarray:
         return self._sensor
+
+    @property
+    def state(self) -> np.ndarray:
+        return self._state
+
+    def load(self, state: np.ndarray, sensordata: np.ndarray) -> None:
+        if state.shape != self._state.shape or sensordata.shape != self._sensor.shape:
+            raise ValueError(f"saved physics state {state.shape} does not fit {self._state.shape}")
+        self._state[:] = state
+        self._sensor[:] = sensordata
 
     def set_state(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         ids = np.asarray(ids)
