@@ -83,3 +83,226 @@ def load_pt_tensor(path: str | Path, *, ndim: int = 2) -> np.ndarray:
         r, c = np.argwhere(bad)[0] if arr.ndim == 2 else (np.argwhere(bad)[0][0], -1)
         raise InputError(path, f"row {r} column {c}", f"{int(bad.sum())} non-finite values (NaN/inf)", "finite values")
     return arr
+
+
+# --------------------------------------------------------------------------- restricted unpickling
+#
+# Raw dataset releases (ParaHome ``*.pkl``, OMOMO joblib ``*.p``) are pickles. A pickle can name any Python
+# callable and run it while loading, so these files are read with an unpickler that resolves only the globals
+# needed to rebuild numpy arrays, dtypes and scalars, and builtin containers; anything else is refused before
+# it is called. joblib files (``joblib.dump``) are supported without importing joblib: their
+# ``NumpyArrayWrapper`` records are rebuilt here from the raw array bytes that follow them (uncompressed, or
+# gzip / bz2 / xz / lzma / zlib compressed). lz4 and the pre-0.10 joblib layout (arrays in side files) are refused.
+
+_BUILTIN_NAMES = frozenset(
+    {"dict", "list", "tuple", "set", "frozenset", "str", "bytes", "bytearray", "int", "float", "bool", "complex"}
+    | {"slice", "range"}
+)
+_NUMPY_GLOBALS = {
+    ("multiarray", "_reconstruct"),
+    ("multiarray", "scalar"),
+    ("numeric", "_frombuffer"),
+}
+_JOBLIB_WRAPPER = ("joblib.numpy_pickle", "NumpyArrayWrapper")
+_COMPRESSED = (
+    (b"\x1f\x8b", "gzip"),
+    (b"BZh", "bz2"),
+    (b"\xfd7zXZ", "xz"),
+    (b"\x5d\x00\x00", "lzma"),
+    (b"\x78", "zlib"),
+)
+_REFUSED_MAGIC = ((b"\x04\x22\x4d\x18", "lz4-compressed joblib"), (b"ZF", "pre-0.10 joblib (arrays in side files)"))
+
+
+class _RefusedGlobal(Exception):
+    def __init__(self, name: str):
+        super().__init__(name)
+        self.name = name
+
+
+def _latin1_encode(text: str, encoding: str = "utf-8") -> bytes:
+    """``_codecs.encode`` as protocol-2 pickles use it for bytes (latin-1 only)."""
+    if encoding.replace("-", "").lower() not in ("latin1", "iso88591"):
+        raise _RefusedGlobal(f"_codecs.encode with encoding {encoding!r}")
+    return text.encode("latin-1")
+
+
+def _numpy_global(module: str, name: str) -> object | None:
+    """The numpy object ``module.name`` if it is on the allow-list, else None."""
+    import importlib
+
+    if module == "numpy" and name in ("dtype", "ndarray"):
+        return getattr(np, name)
+    prefix, _, sub = module.rpartition(".")
+    if prefix not in ("numpy.core", "numpy._core") or (sub, name) not in _NUMPY_GLOBALS:
+        return None
+    for pkg in ("numpy._core", "numpy.core"):  # numpy 2 moved numpy.core to numpy._core
+        try:
+            return getattr(importlib.import_module(f"{pkg}.{sub}"), name)
+        except (ImportError, AttributeError):
+            continue
+    return None
+
+
+def _allowed_global(module: str, name: str) -> object:
+    if module in ("builtins", "__builtin__") and name in _BUILTIN_NAMES:  # __builtin__: protocol < 3
+        return getattr(__import__("builtins"), name)
+    if (module, name) == ("_codecs", "encode"):
+        return _latin1_encode
+    if (module, name) == _JOBLIB_WRAPPER:
+        return _JoblibArray
+    obj = _numpy_global(module, name)
+    if obj is None:
+        raise _RefusedGlobal(f"{module}.{name}")
+    return obj
+
+
+class _JoblibArray:
+    """Stand-in for joblib's ``NumpyArrayWrapper``: array metadata; the bytes follow in the stream."""
+
+    _KEYS = frozenset({"subclass", "shape", "order", "dtype", "allow_mmap", "numpy_array_alignment_bytes"})
+
+    def __setstate__(self, state: dict) -> None:
+        if not isinstance(state, dict) or not set(state) <= self._KEYS:
+            raise _RefusedGlobal("joblib NumpyArrayWrapper with unexpected state")
+        self.__dict__.update(state)
+
+    def read(self, fh: object, path: Path, remaining: int | None) -> np.ndarray:
+        dtype, shape = self.__dict__.get("dtype"), tuple(self.__dict__.get("shape") or ())
+        if not isinstance(dtype, np.dtype) or not all(isinstance(n, int) and n >= 0 for n in shape):
+            raise InputError(path, "<joblib array>", "malformed array header", "a joblib.dump file")
+        if dtype.hasobject:  # joblib pickles object arrays in a nested (protocol 2) pickle
+            return _Restricted(fh, path).load()
+        if self.__dict__.get("numpy_array_alignment_bytes") is not None:
+            pad = fh.read(1)  # type: ignore[attr-defined]
+            fh.read(int.from_bytes(pad, "little"))  # type: ignore[attr-defined]
+        size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        if remaining is not None and size > remaining:
+            raise InputError(path, "<joblib array>", f"array of {size} bytes in a {remaining}-byte file", "intact")
+        data = fh.read(size)  # type: ignore[attr-defined]
+        if len(data) != size:
+            raise InputError(path, "<joblib array>", "file ends inside an array", "a complete joblib.dump file")
+        arr = np.frombuffer(data, dtype=dtype).astype(dtype.newbyteorder("="))
+        return arr.reshape(shape[::-1]).T if self.__dict__.get("order") == "F" else arr.reshape(shape)
+
+
+class _Restricted(pickle._Unpickler):  # type: ignore[name-defined]  # pure-Python: BUILD can be hooked
+    """Allow-list unpickler that also rebuilds joblib's arrays (used only when a file holds them)."""
+
+    dispatch = dict(pickle._Unpickler.dispatch)  # type: ignore[attr-defined]
+
+    def __init__(self, fh: object, path: Path, size: int | None = None):
+        super().__init__(fh)
+        self._fh, self._path, self._size = fh, path, size
+
+    def find_class(self, module: str, name: str) -> object:
+        return _allowed_global(module, name)
+
+    def _load_build(self) -> None:
+        pickle._Unpickler.load_build(self)  # type: ignore[attr-defined]
+        top = self.stack[-1]
+        if isinstance(top, _JoblibArray):
+            remaining = None if self._size is None else self._size - self._fh.tell()  # type: ignore[attr-defined]
+            self.stack[-1] = top.read(self._fh, self._path, remaining)
+
+    dispatch[pickle.BUILD[0]] = _load_build
+
+
+class _FastRestricted(pickle.Unpickler):
+    """The C unpickler with the same allow-list (plain pickles); joblib arrays need :class:`_Restricted`."""
+
+    def find_class(self, module: str, name: str) -> object:
+        if (module, name) == _JOBLIB_WRAPPER:
+            raise _RefusedGlobal("joblib")
+        return _allowed_global(module, name)
+
+
+def _open_stream(path: Path) -> tuple[object, int | None]:
+    """A binary stream over the pickle bytes (decompressing joblib's formats) and its size if known."""
+    import bz2
+    import gzip
+    import io
+    import lzma
+    import zlib
+
+    with open(path, "rb") as f:
+        head = f.read(8)
+    for magic, what in _REFUSED_MAGIC:
+        if head.startswith(magic):
+            raise InputError(path, "<file>", f"{what} is not supported", "a pickle or an uncompressed/gzip joblib file")
+    for magic, kind in _COMPRESSED:
+        if head.startswith(magic):
+            if kind == "zlib":
+                return io.BytesIO(zlib.decompress(path.read_bytes())), None
+            opener = {"gzip": gzip.open, "bz2": bz2.open, "xz": lzma.open, "lzma": lzma.open}[kind]
+            return opener(path, "rb"), None
+    return open(path, "rb"), path.stat().st_size
+
+
+def safe_pickle_load(path: str | Path) -> object:
+    """Load a pickle (or joblib file) that may hold only numpy arrays/dtypes/scalars and builtin containers.
+
+    Allowed globals: numpy's ``_reconstruct``, ``scalar`` and ``_frombuffer`` (``numpy.core`` or
+    ``numpy._core``), ``numpy.dtype``, ``numpy.ndarray``; builtins dict, list, tuple, set, frozenset, str, bytes,
+    bytearray, int, float, bool, complex, slice, range; ``_codecs.encode`` (latin-1 only: bytes in protocol-2
+    pickles); joblib's ``NumpyArrayWrapper`` (rebuilt here; nothing of joblib is imported). Any other global
+    (a class, ``os.system``, ...) raises :class:`InputError` naming the file and the refused global, before
+    anything is called. Corrupt or truncated files raise :class:`InputError` as well.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, None, "file not found")
+    for fast in (True, False):
+        stream, size = _open_stream(path)
+        try:
+            with stream:  # type: ignore[attr-defined]
+                if fast:
+                    return _FastRestricted(stream).load()  # type: ignore[arg-type]
+                return _Restricted(stream, path, size).load()
+        except _RefusedGlobal as exc:
+            if fast and exc.name == "joblib":
+                continue  # the file holds joblib arrays: read it again with the hooked unpickler
+            raise InputError(
+                path, "<pickle>", f"refused global {exc.name}", "numpy arrays and builtin containers only"
+            ) from None
+        except InputError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - truncated / not a pickle / decompression errors
+            raise InputError(
+                path, "<pickle>", f"cannot be unpickled ({type(exc).__name__}: {str(exc)[:120]})", "a pickle file"
+            ) from None
+    raise AssertionError("unreachable")
+
+
+def safe_npz_load(path: str | Path) -> dict[str, np.ndarray]:
+    """All arrays of an ``.npz``; object arrays are rebuilt with the restricted unpickler (no code runs)."""
+    import io
+    import zipfile
+
+    path = Path(path)
+    out: dict[str, np.ndarray] = {}
+    try:
+        with zipfile.ZipFile(path) as z:
+            for member in z.namelist():
+                if not member.endswith(".npy"):
+                    continue
+                with z.open(member) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    fmt = np.lib.format
+                    read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+                    _, _, dtype = read_header(fh)
+                    if dtype.hasobject:
+                        obj = _Restricted(io.BytesIO(fh.read()), path).load()
+                    else:
+                        obj = None
+                if obj is None:
+                    with z.open(member) as fh:
+                        obj = np.lib.format.read_array(fh, allow_pickle=False)
+                out[member[: -len(".npy")]] = np.asarray(obj) if not isinstance(obj, np.ndarray) else obj
+    except _RefusedGlobal as exc:
+        raise InputError(path, "<npz>", f"refused global {exc.name}", "numeric arrays") from None
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, pickle.UnpicklingError) as exc:
+        raise InputError(
+            path, "<npz>", f"cannot be read ({type(exc).__name__}: {str(exc)[:120]})", "an .npz file"
+        ) from None
+    return out

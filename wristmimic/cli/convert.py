@@ -119,3 +119,88 @@ def skillmimic_parahome(
             options=_options(hull_cache, no_hull_cache, hull_seed, quiet),
         )
     _summary(r)
+
+
+@app.command("parahome-raw")
+def parahome_raw(
+    root: Path = typer.Argument(
+        ..., help="ParaHome data folder with seq/sN/*.pkl and scan/<obj>/simplified/*.obj (or sN/ beside scan/)."
+    ),
+    sequence: str = typer.Option(..., "--sequence", "-s", help="Sequence folder name, e.g. s110."),
+    out: Path = _OUT,
+    frames: list[str] = typer.Option(
+        None, "--frames", help="Clip START:END (end exclusive, repeatable); id sN_<START>_<END>."
+    ),
+    annotation: list[int] = typer.Option(
+        None, "--annotation", "-a", help="Clip = the N-th text annotation, sorted by start (repeatable)."
+    ),
+    skip_missing: bool = typer.Option(
+        False, "--skip-missing", help="Skip (and report) object parts whose mesh is missing instead of failing."
+    ),
+    hull_cache: Path = _CACHE,
+    no_hull_cache: bool = _NOCACHE,
+    hull_seed: int = _SEED,
+    quiet: bool = _QUIET,
+) -> None:
+    """Raw ParaHome sequence (6D orientations, bone vectors, object part transforms) -> canonical HDF5, with a
+    humanoid generated from the sequence's bone vectors, every scene object part placed per frame, and contacts
+    from geometry. Without --frames / --annotation the whole sequence is one clip.
+
+    Example: wristmimic convert parahome-raw data/ -s s110 --frames 200:355 -o datasets/s110.h5
+    """
+    from wristmimic.convert.parahome_raw import convert_parahome_raw
+
+    with user_errors():
+        r = convert_parahome_raw(
+            root,
+            sequence,
+            out,
+            frames=frames or None,
+            annotations=annotation or None,
+            skip_missing=skip_missing,
+            options=_options(hull_cache, no_hull_cache, hull_seed, quiet),
+        )
+    _summary(r)
+
+
+@app.command("omomo-raw")
+def omomo_raw(
+    pickle_file: Path = typer.Argument(
+        ..., help="OMOMO joblib file, e.g. train_diffusion_manip_seq_joints24.p (read without running code)."
+    ),
+    objects: Path = typer.Option(
+        ..., "--objects", help="captured_objects/ folder with <obj>_cleaned_simplified[_top|_bottom].obj."
+    ),
+    out: Path = _OUT,
+    smplx_models: Path = typer.Option(
+        None,
+        "--smplx-models",
+        help="Folder with SMPLX_MALE.npz / SMPLX_FEMALE.npz (or smplx/SMPLX_*.npz) from "
+        "https://smpl-x.is.tue.mpg.de (free registration); builds each subject's humanoid.",
+    ),
+    sequence: list[str] = typer.Option(
+        None, "--sequence", "-s", help="Convert only these seq_name values (repeatable) [default: all]."
+    ),
+    hull_cache: Path = _CACHE,
+    no_hull_cache: bool = _NOCACHE,
+    hull_seed: int = _SEED,
+    quiet: bool = _QUIET,
+) -> None:
+    """Raw OMOMO records (SMPL-X betas and pose, object pose and scale) -> canonical HDF5, with per-subject
+    humanoids generated from the SMPL-X shape, mesh scale baked per sequence, Z-up kept, contacts from geometry.
+
+    Example: wristmimic convert omomo-raw data/test_diffusion_manip_seq_joints24.p --objects
+    data/captured_objects --smplx-models data/smpl_all_models -s sub16_suitcase_000 -o datasets/omomo_raw.h5
+    """
+    from wristmimic.convert.omomo_raw import convert_omomo_raw
+
+    with user_errors():
+        r = convert_omomo_raw(
+            pickle_file,
+            objects,
+            out,
+            smplx_models=smplx_models,
+            sequences=sequence or None,
+            options=_options(hull_cache, no_hull_cache, hull_seed, quiet),
+        )
+    _summary(r)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import typer
 
 from wristmimic import __version__
-from wristmimic.cli import convert, inspect, scene, validate
+from wristmimic.cli import convert, humanoid, inspect, scene, validate
 
 app = typer.Typer(
     name="wristmimic",
@@ -16,6 +16,7 @@ app = typer.Typer(
     add_completion=False,
 )
 app.add_typer(convert.app, name="convert")
+app.add_typer(humanoid.app, name="humanoid")
 app.command("inspect")(inspect.inspect_cmd)
 app.command("validate")(validate.validate_cmd)
 app.command("scene")(scene.scene_cmd)
