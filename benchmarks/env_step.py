@@ -74,7 +74,7 @@ def main() -> None:
     ap.add_argument("--sequence")
     ap.add_argument("--worlds", type=int, nargs="+", default=[64, 256])
     ap.add_argument("--steps", type=int, default=20)
-    ap.add_argument("--ig-points", type=int, default=EnvConfig().ig_points)
+    ap.add_argument("--ig-points", type=int, default=EnvConfig().ig_points, help="interaction-graph points")
     args = ap.parse_args()
     cfg = EnvConfig(ig_points=args.ig_points)
     with tempfile.TemporaryDirectory() as tmp:

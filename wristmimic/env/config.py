@@ -109,8 +109,13 @@ class EnvConfig:
     window: WindowConfig = field(default_factory=WindowConfig)
     wrist: WristThresholds = field(default_factory=WristThresholds)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
-    ig_points: int = 1024
-    """Object surface points used for the interaction graph (stored: 1024)."""
+    ig_points: int = 128
+    """Object surface points (a seeded subset of the 1,024 stored) for the interaction graph, nearest-point
+    features and object error. InterMimic uses all 1,024; on CPU the all-pairs graph then costs as much as
+    the physics (benchmarks/env_step.py), 128 keeps the environment >= 80 % inside MuJoCo."""
+    math_threads: int = 1
+    """torch threads for observation/reward math inside ``step``; 1 avoids OpenMP contention with the
+    physics threads on small machines (restored afterwards)."""
     contact_force_threshold: float = 0.1
     """A body counts as in contact when its net contact force exceeds this (N)."""
     max_episode_frames: int = 300

@@ -70,10 +70,13 @@ class Reference:
         return Reference(**{k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in self.__dict__.items()})
 
 
-def load_reference(ds: Dataset, scene: Scene, ig_points: int = 1024, seed: int = 0) -> Reference:
-    """Read the sequence of ``scene`` from ``ds`` and derive velocities, surface points and distances."""
+def load_reference(
+    ds: Dataset, scene: Scene, ig_points: int = 1024, seed: int = 0, max_frames: int | None = None
+) -> Reference:
+    """Read the sequence of ``scene`` from ``ds`` and derive velocities, surface points and distances.
+    ``max_frames`` keeps only the first frames (a short task, e.g. for tests)."""
     seq = ds.sequence(scene.sequence_id)
-    s = seq.load()
+    s = seq.load(None if max_frames is None else slice(0, max(int(max_frames), 2)))
     fps = float(ds.attrs.get("fps", 30.0))
     dyn_idx = [k for k, o in enumerate(scene.objects) if o.dynamic]
     obj_pos = s.object_pos[:, dyn_idx].astype(np.float64)

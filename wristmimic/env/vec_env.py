@@ -135,12 +135,14 @@ class WristMimicEnv:
         scene_config: SceneConfig | None = None,
         seed: int = 0,
         nthread: int | None = None,
+        max_frames: int | None = None,
     ) -> WristMimicEnv:
-        """Build the scene and reference of ``sequence_id`` from a canonical file."""
+        """Build the scene and reference of ``sequence_id`` from a canonical file (``max_frames``: keep only the
+        first frames of the reference)."""
         cfg = config or EnvConfig()
         with open_dataset(dataset) as ds:
             scene = build_scene(ds, sequence_id, scene_config)
-            ref = load_reference(ds, scene, cfg.ig_points, seed)
+            ref = load_reference(ds, scene, cfg.ig_points, 0, max_frames)  # point subset independent of the env seed
         return cls(scene, ref, num_worlds, cfg, seed, nthread=nthread)
 
     @property
@@ -266,6 +268,14 @@ class WristMimicEnv:
 
     def step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
         """Advance every world one 30 Hz control step."""
+        threads = torch.get_num_threads()
+        torch.set_num_threads(self.cfg.math_threads)
+        try:
+            return self._step(action)
+        finally:
+            torch.set_num_threads(threads)
+
+    def _step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
         self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(torch.float32)).numpy()
         self.backend.step(self._ctrl, self.scene.config.substeps)
         self.frame += 1
