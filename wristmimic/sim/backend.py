@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import os
+import time
 from typing import Protocol
 
 import mujoco
@@ -74,6 +75,8 @@ class CpuRolloutBackend:
         self._qpos = slice(1, 1 + model.nq)
         self._qvel = slice(1 + model.nq, 1 + model.nq + model.nv)
         self._out_state: np.ndarray | None = None
+        self.physics_seconds = 0.0
+        """Wall time spent inside MuJoCo (rollout calls) so far, for benchmarks."""
         self._out_sensor: np.ndarray | None = None
 
     @property
@@ -108,7 +111,9 @@ class CpuRolloutBackend:
         st[:, self._qvel] = qvel
         st[:, 1 + self.model.nq + self.model.nv :] = 0.0
         ctrl = np.zeros((len(ids), 1, self.model.nu))
+        t0 = time.perf_counter()
         _, sens = self._pool.rollout(self._probe, self._datas, st, ctrl, nstep=1)
+        self.physics_seconds += time.perf_counter() - t0
         self._state[ids] = st
         self._sensor[ids] = sens[:, 0]
 
@@ -118,6 +123,7 @@ class CpuRolloutBackend:
             self._out_state = np.empty((n, substeps, self.nstate))
             self._out_sensor = np.empty((n, substeps, self.model.nsensordata))
         ctrl = np.ascontiguousarray(np.broadcast_to(ctrl[:, None, :], (n, substeps, self.model.nu)))
+        t0 = time.perf_counter()
         self._pool.rollout(
             self.model,
             self._datas,
@@ -127,6 +133,7 @@ class CpuRolloutBackend:
             state=self._out_state,
             sensordata=self._out_sensor,
         )
+        self.physics_seconds += time.perf_counter() - t0
         self._state[:] = self._out_state[:, -1]
         self._sensor[:] = self._out_sensor[:, -1]
 
