@@ -212,6 +212,17 @@ def geometric_contacts(
     return dist, labels
 
 
+def geometric_contact_meta(params: C.ContactParams, against: str = "object surface samples") -> dict[str, Any]:
+    """``contacts`` attributes of a sequence whose labels come from geometry."""
+    return {
+        "labels_method": f"geometry: humanoid geom surface points vs {against} (KD-tree)",
+        "geometric_method": "same as labels",
+        "params": params.to_dict(),
+        "t_b": params.t_b,
+        "t_a": params.t_a,
+    }
+
+
 def contact_summary(labels: np.ndarray, roles: dict[str, np.ndarray], params: C.ContactParams) -> dict[str, Any]:
     """Per-hand flags, first contact frames and the contact window from per-body labels."""
     hand = C.hand_contact(labels, roles["left_hand"], roles["right_hand"])

@@ -28,6 +28,7 @@ from wristmimic.convert.common import (
     ConvertOptions,
     ConvertReport,
     contact_summary,
+    geometric_contact_meta,
     geometric_contacts,
     humanoid_record,
     kinematics,
@@ -324,11 +325,7 @@ def _sequence(
         object_pos=obj_pos, object_quat=obj_quat, contact_labels=geo, contact_geometric=geo, contact_distance=dist,
         hand_contact=summ["hand"], object_contact=summ["hand"].any(axis=1), first_contact_frame=summ["first"],
         contact_window=summ["window"],
-        contact_meta={
-            "labels_method": "geometry: humanoid geom surface points vs object surface samples (KD-tree)",
-            "geometric_method": "same as labels", "params": opts.contact.to_dict(),
-            "t_b": opts.contact.t_b, "t_a": opts.contact.t_a,
-        },
+        contact_meta=geometric_contact_meta(opts.contact, "object surface samples"),
         source_file=path.name, extra={
             "fk_rotation_error_deg": kin.fk_rotation_error_deg, "smplx_joint_error_m": joint_err,
             "gender": s.gender, "betas": np.round(s.betas, 6).tolist(), "object": s.object,

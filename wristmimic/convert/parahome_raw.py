@@ -36,6 +36,7 @@ from wristmimic.convert.common import (
     ConvertOptions,
     ConvertReport,
     contact_summary,
+    geometric_contact_meta,
     geometric_contacts,
     humanoid_record,
     kinematics,
@@ -352,11 +353,7 @@ def _clip(
         object_pos=obj_pos, object_quat=obj_quat, contact_labels=geo, contact_geometric=geo, contact_distance=dist,
         hand_contact=summ["hand"], object_contact=summ["hand"].any(axis=1), first_contact_frame=summ["first"],
         contact_window=summ["window"],
-        contact_meta={
-            "labels_method": "geometry: humanoid geom surface points vs moving object parts (KD-tree)",
-            "geometric_method": "same as labels", "params": opts.contact.to_dict(),
-            "t_b": opts.contact.t_b, "t_a": opts.contact.t_a,
-        },
+        contact_meta=geometric_contact_meta(opts.contact, "moving object parts"),
         text=clip.text, source_file=f"{raw.folder.name}/", extra={
             "fk_rotation_error_deg": kin.fk_rotation_error_deg,
             "fk_position_error_m": fk_pos,

@@ -28,6 +28,7 @@ from wristmimic.convert.common import (
     ConvertOptions,
     ConvertReport,
     contact_summary,
+    geometric_contact_meta,
     geometric_contacts,
     humanoid_record,
     kinematics,
@@ -359,13 +360,7 @@ def _clip(
         object_contact=touched,
         first_contact_frame=summ["first"],
         contact_window=summ["window"],
-        contact_meta={
-            "labels_method": "geometry: humanoid geom surface points vs object surface samples (KD-tree)",
-            "geometric_method": "same as labels",
-            "params": opts.contact.to_dict(),
-            "t_b": opts.contact.t_b,
-            "t_a": opts.contact.t_a,
-        },
+        contact_meta=geometric_contact_meta(opts.contact, "object surface samples"),
         text=clip.skill.replace("_", " "),
         source_file=str(clip.path.name),
         extra={
