@@ -1,0 +1,65 @@
+"""Plot a training run's learning curves (episode length and reward vs frames) from its metrics.csv.
+
+Usage:  python scripts/learning_curve.py RUN_DIR -o reports/learning_curve_<scene>.png [--smooth 10]
+
+Panels: mean episode length, mean per-step reward and success rate (episodes that reached the end of the
+sequence) against environment frames; faint lines are per-iteration values, bold lines a moving average.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from wristmimic.safe_io import atomic_output  # noqa: E402
+
+PANELS = (("episode_length_mean", "mean episode length (frames)"), ("reward_mean", "mean reward per step"))
+PANELS += (("success_rate", "success rate"),)
+
+
+def plot(run_dir: Path, out: Path, smooth: int) -> Path:
+    metrics = run_dir / "metrics.csv"
+    if not metrics.is_file():
+        sys.exit(f"error: {metrics}: not found (expected a run folder from `wristmimic train`)")
+    m = pd.read_csv(metrics)
+    if m.empty:
+        sys.exit(f"error: {metrics}: no iterations yet")
+    cfg = json.loads((run_dir / "config.json").read_text()) if (run_dir / "config.json").is_file() else {}
+    title = f"{cfg.get('scene', run_dir.name)} [{cfg.get('variant', '?')}] seed {cfg.get('seed', '?')}"
+    fig, axes = plt.subplots(1, len(PANELS), figsize=(5 * len(PANELS), 3.6), constrained_layout=True)
+    for ax, (col, label) in zip(axes, PANELS, strict=True):
+        y = m[col].astype(float)
+        ax.plot(m["frames"], y, alpha=0.3, lw=0.8)
+        ax.plot(m["frames"], y.rolling(smooth, min_periods=1).mean(), lw=2)
+        ax.set_xlabel("environment frames")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    fig.suptitle(title)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(out, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run_dir", type=Path)
+    ap.add_argument("-o", "--out", type=Path, help="PNG [default: reports/learning_curve_<scene>.png]")
+    ap.add_argument("--smooth", type=int, default=10, help="moving-average window in iterations")
+    args = ap.parse_args()
+    scene = args.run_dir.name.split("-")[0]
+    out = args.out or Path("reports") / f"learning_curve_{scene}.png"
+    print(f"wrote {plot(args.run_dir, out, max(1, args.smooth))}")
+
+
+if __name__ == "__main__":
+    main()

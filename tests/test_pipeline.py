@@ -1,0 +1,108 @@
+"""Pipelines: a tiny synthetic convert -> train pipeline runs once, then a second run does no work; a changed
+parameter re-runs only what depends on it; stages not implemented yet are reported, not skipped silently."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from wristmimic.cli.main import app
+from wristmimic.errors import InputError
+from wristmimic.pipeline import STAGES, load_spec, run_pipeline
+
+from synthetic import write_intermimic_folder
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _write_spec(tmp: Path, seed: int = 0, extra: str = "") -> Path:
+    src = write_intermimic_folder(tmp / "src", T=30)
+    spec = tmp / "tiny.toml"
+    spec.write_text(
+        f"""
+[pipeline]
+name = "tiny"
+work_dir = "{tmp / "work"}"
+
+[convert]
+format = "intermimic"
+source = "{src}"
+output = "{tmp / "data" / "tiny.h5"}"
+hull_cache = "{tmp / "hulls"}"
+
+[train]
+scenes = "all"
+seed = {seed}
+[train.ppo]
+num_envs = 2
+horizon = 4
+minibatch_size = 8
+epochs = 1
+actor_hidden = [16]
+critic_hidden = [16]
+max_frames = 16
+{extra}
+"""
+    )
+    return spec
+
+
+def _statuses(ctx) -> dict[str, str]:
+    return dict(ctx.summary)
+
+
+def test_second_run_does_no_work_and_a_changed_seed_retrains_only(tmp_path: Path) -> None:
+    spec = _write_spec(tmp_path)
+    first = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    assert set(_statuses(first).values()) == {"ran"} and len(first.summary) == 2
+    h5, (run_dir,) = tmp_path / "data" / "tiny.h5", first.outputs["runs"]
+    stamps = {p: p.stat().st_mtime_ns for p in (h5, run_dir / "checkpoint.pt", run_dir / "metrics.csv")}
+    second = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    assert set(_statuses(second).values()) == {"up to date"}
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+    _write_spec(tmp_path, seed=1)
+    third = _statuses(run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None))
+    assert [s for u, s in third.items() if u.startswith("convert")] == ["up to date"]
+    assert [s for u, s in third.items() if u.startswith("train")] == ["ran"]
+
+
+def test_a_changed_output_is_redone(tmp_path: Path) -> None:
+    spec = _write_spec(tmp_path)
+    run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    (tmp_path / "data" / "tiny.h5").write_bytes(b"overwritten")
+    again = _statuses(run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None))
+    assert [s for u, s in again.items() if u.startswith("convert")] == ["ran"]
+
+
+def test_unimplemented_stages_are_reported_by_the_command(tmp_path: Path) -> None:
+    spec = _write_spec(tmp_path, extra="[evaluate]\n[report]\n")
+    r = CliRunner().invoke(app, ["run", str(spec), "-q", "--nthread", "1"])
+    assert r.exit_code == 0, r.output
+    assert "evaluate: not available yet" in r.output and "report: not available yet" in r.output
+    assert "2 ran, 0 up to date, not available yet: evaluate, report" in r.output
+    r = CliRunner().invoke(app, ["run", str(spec), "-q", "--nthread", "1"])
+    assert "0 ran, 2 up to date" in r.output
+
+
+def test_bad_pipeline_files_fail_with_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[deploy]\n")
+    with pytest.raises(InputError, match="unknown stage"):
+        load_spec(bad)
+    bad.write_text("[train]\nlearning_rate = 1\n")
+    with pytest.raises(InputError, match="unknown key"):
+        load_spec(bad)
+    bad.write_text("[train\n")
+    with pytest.raises(InputError, match="not valid TOML"):
+        load_spec(bad)
+    r = CliRunner().invoke(app, ["run", str(tmp_path / "missing.toml")])
+    assert r.exit_code == 1 and "file not found" in r.output
+
+
+@pytest.mark.parametrize("name", ["omomo", "parahome"])
+def test_shipped_pipelines_parse(name: str) -> None:
+    spec = load_spec(REPO / "pipelines" / f"{name}.toml")
+    assert set(spec) - {"pipeline"} <= set(STAGES) and spec["train"]["preset"] == "cpu"
+    assert Path(spec["convert"]["source"]).name in ("intermimic_omomo", "skillmimic_parahome")

@@ -1,0 +1,151 @@
+"""PPO pieces on small crafted tensors: GAE, bounds loss, normaliser, Gaussian log-prob, storage, update, config."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from wristmimic.env.config import EnvConfig, variant_config
+from wristmimic.errors import InputError
+from wristmimic.rl.config import PRESETS, PPOConfig, from_jsonable, preset, to_jsonable
+from wristmimic.rl.networks import ActorCritic, ObsNormalizer
+from wristmimic.rl.ppo import PPO, bounds_loss, compute_gae
+from wristmimic.rl.storage import RolloutStorage
+from wristmimic.scene import SceneConfig
+
+
+def _gae_by_definition(r, v, term, tout, last, gamma, lam):
+    """A_t = sum_k (gamma lam)^k delta_{t+k}, stopping after the first step that ends an episode."""
+    H, N = r.shape
+    adv = torch.zeros(H, N)
+    for n in range(N):
+        for t in range(H):
+            total, discount = 0.0, 1.0
+            for k in range(t, H):
+                rk = r[k, n] + gamma * v[k, n] * tout[k, n]
+                nxt = last[n] if k == H - 1 else v[k + 1, n]
+                done = max(term[k, n], tout[k, n])
+                total += discount * (rk + gamma * nxt * (1 - done) - v[k, n])
+                if done:
+                    break
+                discount *= gamma * lam
+            adv[t, n] = total
+    return adv
+
+
+def test_gae_matches_its_definition_with_terminations_and_time_outs() -> None:
+    g = torch.Generator().manual_seed(0)
+    H, N = 7, 3
+    r, v, last = torch.rand(H, N, generator=g), torch.rand(H, N, generator=g), torch.rand(N, generator=g)
+    term, tout = torch.zeros(H, N), torch.zeros(H, N)
+    term[2, 0], tout[4, 1], tout[6, 2] = 1, 1, 1
+    adv, ret = compute_gae(r, v, term, tout, last, 0.9, 0.8)
+    torch.testing.assert_close(adv, _gae_by_definition(r, v, term, tout, last, 0.9, 0.8))
+    torch.testing.assert_close(ret, adv + v)
+
+
+def test_gae_bootstraps_time_outs_but_not_terminations() -> None:
+    r, v, last = torch.zeros(1, 2), torch.full((1, 2), 5.0), torch.full((2,), 7.0)
+    adv, _ = compute_gae(r, v, torch.tensor([[1.0, 0.0]]), torch.tensor([[0.0, 1.0]]), last, 0.5, 0.9)
+    assert adv[0, 0] == pytest.approx(-5.0)  # terminated: 0 - V(s)
+    assert adv[0, 1] == pytest.approx(0.5 * 5.0 - 5.0)  # timed out: gamma V(s_t) stands in for the lost state
+
+
+def test_bounds_loss_is_zero_inside_and_quadratic_outside() -> None:
+    assert bounds_loss(torch.tensor([[0.5, -1.0, 0.99]]), 1.0) == 0
+    assert bounds_loss(torch.tensor([[1.5, -3.0]]), 1.0) == pytest.approx(0.25 + 4.0)
+
+
+def test_obs_normalizer_equals_the_statistics_of_all_batches_and_round_trips() -> None:
+    g = torch.Generator().manual_seed(1)
+    batches = [torch.randn(n, 4, generator=g) * 3 + 2 for n in (5, 17, 1, 40)]
+    norm = ObsNormalizer(4, clip=100.0)
+    for b in batches:
+        norm.update(b)
+    x = torch.cat(batches).double()
+    torch.testing.assert_close(norm.mean, x.mean(0))
+    torch.testing.assert_close(norm.var, x.var(0, unbiased=False))
+    other = ObsNormalizer(4, clip=100.0)
+    other.load_state_dict(norm.state_dict())
+    torch.testing.assert_close(other(x.float()), ((x - x.mean(0)) / x.std(0, unbiased=False)).float())
+    assert ObsNormalizer(4, clip=1.0)(torch.full((1, 4), 50.0)).max() == 1.0
+
+
+def test_log_prob_is_the_fixed_sigma_gaussian_and_sigma_is_not_learned() -> None:
+    net = ActorCritic(6, 3, (16,), (16,), log_std=-2.9)
+    mu, a = torch.randn(5, 3), torch.randn(5, 3)
+    ref = torch.distributions.Normal(mu, math.exp(-2.9)).log_prob(a).sum(-1)
+    torch.testing.assert_close(net.log_prob(mu, a), ref)
+    assert "log_std" not in dict(net.named_parameters())
+    actions, logp, mu0, value = net.act(torch.zeros(1000, 6), torch.Generator().manual_seed(0))
+    assert (actions - mu0).std().item() == pytest.approx(math.exp(-2.9), rel=0.05)
+    assert value.shape == logp.shape == (1000,)
+
+
+def _filled_storage(net: ActorCritic, H: int = 4, N: int = 8) -> RolloutStorage:
+    g = torch.Generator().manual_seed(2)
+    st = RolloutStorage(H, N, net.obs_size, net.action_size)
+    for _ in range(H):
+        obs = torch.randn(N, net.obs_size, generator=g)
+        a, lp, mu, v = net.act(obs, g)
+        reward = (a[:, 0] > mu[:, 0]).float()  # acting above the mean on action 0 pays
+        st.add(obs, a, lp, mu, v, reward, torch.zeros(N, dtype=torch.bool), torch.ones(N, dtype=torch.bool))
+    return st
+
+
+def test_storage_rejects_a_step_beyond_the_horizon_and_minibatches_cover_each_sample_once() -> None:
+    net = ActorCritic(3, 2, (8,), (8,), -1.0)
+    st = _filled_storage(net, H=3, N=4)
+    with pytest.raises(RuntimeError, match="full"):
+        st.add(*(torch.zeros(4, k) for k in (3, 2)), torch.zeros(4), torch.zeros(4, 2), *(torch.zeros(4),) * 4)
+    st.observations = torch.arange(12.0).reshape(3, 4, 1).expand(3, 4, 3).clone()
+    seen = [mb["observations"][:, 0] for mb in st.minibatches(4, 2, torch.Generator().manual_seed(0))]
+    assert len(seen) == 6 and all(len(s) == 4 for s in seen)
+    assert sorted(torch.cat(seen[:3]).tolist()) == list(range(12))
+
+
+def test_update_moves_the_mean_toward_actions_with_positive_advantage() -> None:
+    torch.manual_seed(0)
+    net = ActorCritic(4, 2, (32,), (32,), log_std=-1.0)
+    cfg = PPOConfig(num_envs=8, horizon=4, minibatch_size=16, epochs=4, learning_rate=1e-3, actor_hidden=(32,))
+    alg = PPO(net, cfg)
+    st = _filled_storage(net)
+    alg.compute_returns(st, torch.zeros(8))
+    before = net.actor(st.observations.flatten(0, 1))[:, 0].mean().item()
+    losses = alg.update(st, torch.Generator().manual_seed(0))
+    after = net.actor(st.observations.flatten(0, 1))[:, 0].mean().item()
+    assert after > before + 0.01
+    assert set(losses) >= {"loss/policy", "loss/value", "loss/bounds", "loss/approx_kl", "loss/clip_fraction"}
+    assert all(math.isfinite(v) for v in losses.values())
+
+
+def test_first_gradient_step_sees_ratio_one() -> None:
+    net = ActorCritic(4, 2, (8,), (8,), log_std=-2.9)
+    cfg = PPOConfig(num_envs=8, horizon=4, minibatch_size=32, epochs=1)
+    st = _filled_storage(net)
+    alg = PPO(net, cfg)
+    alg.compute_returns(st, torch.zeros(8))
+    losses = alg.update(st, torch.Generator().manual_seed(0))
+    assert losses["loss/approx_kl"] == pytest.approx(0.0, abs=1e-6) and losses["loss/clip_fraction"] == 0.0
+
+
+def test_presets_and_config_errors() -> None:
+    paper = PRESETS["paper"]
+    assert (paper.num_envs, paper.horizon, paper.minibatch_size, paper.epochs) == (2048, 32, 8192, 6)
+    assert (paper.learning_rate, paper.gamma, paper.lam, paper.clip) == (2e-5, 0.99, 0.95, 0.2)
+    assert paper.actor_hidden == (1024, 1024, 512) and paper.sigma == pytest.approx(0.055, abs=1e-3)
+    small = preset("cpu", num_envs=10)  # keeps the preset's 4 minibatches
+    assert small.batch_size // small.minibatch_size == PRESETS["cpu"].batch_size // PRESETS["cpu"].minibatch_size
+    with pytest.raises(InputError, match="unknown preset"):
+        preset("gpu")
+    with pytest.raises(InputError, match="does not divide"):
+        PPOConfig(num_envs=3, horizon=5, minibatch_size=4)
+
+
+@pytest.mark.parametrize("cfg", [PRESETS["cpu"], variant_config("intermimic"), EnvConfig(), SceneConfig()])
+def test_configs_round_trip_through_json(cfg) -> None:
+    assert from_jsonable(type(cfg), to_jsonable(cfg)) == cfg
+    with pytest.raises(InputError, match="unknown field"):
+        from_jsonable(type(cfg), {**to_jsonable(cfg), "bogus": 1})

@@ -1,0 +1,199 @@
+"""Training runs on a synthetic scene: run folder contents, determinism, bit-for-bit resume, Ctrl-C, policy
+loading, the ``wristmimic train`` command and the learning-curve script."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import runpy
+import signal
+from pathlib import Path
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+import wristmimic
+from wristmimic.cli.main import app
+from wristmimic.convert.common import ConvertOptions
+from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.errors import InputError
+from wristmimic.rl import TrainSpec, load_policy, preset, resume_run, start_run
+from wristmimic.rl.checkpoint import load_checkpoint
+from wristmimic.rl.logger import TIME_COLUMNS
+from wristmimic.rl.runner import Runner
+from wristmimic.safe_io import sha256_file
+
+from synthetic import write_intermimic_folder
+
+SID = "sub1_box_000"
+TINY = dict(num_envs=4, horizon=8, minibatch_size=16, epochs=2, actor_hidden=(32,), critic_hidden=(32,))
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("rl")
+    out = tmp / "im.h5"
+    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
+    convert_intermimic(write_intermimic_folder(tmp / "im", T=40), out, options=opts)
+    return out
+
+
+def _spec(dataset: Path, iterations: int, seed: int = 0, **kw) -> TrainSpec:
+    ppo = preset("cpu", **TINY, max_frames=4 * 8 * iterations, checkpoint_every=2, **kw)
+    return TrainSpec(dataset, SID, "wristmimic", seed, "cpu", ppo)
+
+
+def _rows(run_dir: Path) -> list[dict[str, str]]:
+    with open(run_dir / "metrics.csv", newline="") as f:
+        return [{k: v for k, v in r.items() if k not in TIME_COLUMNS} for r in csv.DictReader(f)]
+
+
+def _params(run_dir: Path) -> dict[str, torch.Tensor]:
+    return load_checkpoint(run_dir)["policy"]
+
+
+def _same_params(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_run_folder_holds_config_metrics_and_a_safe_checkpoint(dataset: Path, tmp_path: Path) -> None:
+    r = start_run(_spec(dataset, 3), tmp_path / "run", nthread=1, progress=False)
+    assert (r.status, r.iteration, r.frames) == ("finished", 3, 96)
+    cfg = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert cfg["dataset"]["sha256"] == sha256_file(dataset) and cfg["seed"] == 0 and cfg["scene"] == SID
+    assert cfg["code"]["version"] == wristmimic.__version__ and "git_commit" in cfg["code"]
+    assert cfg["ppo"]["num_envs"] == 4 and cfg["env"]["variant"] == "wristmimic" and "timestep" in cfg["scene_config"]
+    rows = _rows(tmp_path / "run")
+    assert [int(x["iteration"]) for x in rows] == [1, 2, 3] and rows[-1]["frames"] == "96"
+    for col in ("reward_mean", "episode_length_mean", "success_rate", "reward/body_pos", "termination/fall"):
+        assert col in rows[0]
+    assert {"loss/policy", "loss/value", "loss/bounds"} <= set(rows[0])
+    state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True, map_location="cpu")
+    assert state["iteration"] == 3 and state["storage_step"] == 0
+    assert not list((tmp_path / "run").glob("*.tmp"))
+
+
+def test_same_seed_gives_identical_metrics_and_parameters(dataset: Path, tmp_path: Path) -> None:
+    for name, seed in (("a", 0), ("b", 0), ("c", 1)):
+        start_run(_spec(dataset, 2, seed), tmp_path / name, nthread=2, progress=False)
+    assert _rows(tmp_path / "a") == _rows(tmp_path / "b")
+    assert _same_params(_params(tmp_path / "a"), _params(tmp_path / "b"))
+    assert not _same_params(_params(tmp_path / "a"), _params(tmp_path / "c"))
+    assert _rows(tmp_path / "a") != _rows(tmp_path / "c")
+
+
+def test_resume_continues_bit_for_bit(dataset: Path, tmp_path: Path) -> None:
+    start_run(_spec(dataset, 4), tmp_path / "once", nthread=1, progress=False)
+    half = start_run(_spec(dataset, 2), tmp_path / "split", nthread=1, progress=False)
+    assert half.iteration == 2
+    r = resume_run(tmp_path / "split", max_frames=4 * 8 * 4, nthread=1, progress=False)
+    assert (r.status, r.iteration) == ("finished", 4)
+    assert _rows(tmp_path / "once") == _rows(tmp_path / "split")
+    a, b = load_checkpoint(tmp_path / "once"), load_checkpoint(tmp_path / "split")
+    assert _same_params(a["policy"], b["policy"])
+    assert torch.equal(a["env"]["physics"], b["env"]["physics"]) and torch.equal(a["obs"], b["obs"])
+    assert resume_run(tmp_path / "split", nthread=1, progress=False).status == "up to date"
+
+
+def test_ctrl_c_saves_a_checkpoint_and_resume_matches_an_uninterrupted_run(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    start_run(_spec(dataset, 3), tmp_path / "once", nthread=1, progress=False)
+    collect = Runner.collect
+
+    def interrupted_collect(self: Runner) -> dict:
+        if self.iteration == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # as if the user pressed Ctrl-C during iteration 2
+        return collect(self)
+
+    monkeypatch.setattr(Runner, "collect", interrupted_collect)
+    r = start_run(_spec(dataset, 3), tmp_path / "cut", nthread=1, progress=False)
+    assert (r.status, r.iteration) == ("interrupted", 2)
+    assert load_checkpoint(tmp_path / "cut")["iteration"] == 2
+    monkeypatch.setattr(Runner, "collect", collect)
+    assert resume_run(tmp_path / "cut", nthread=1, progress=False).iteration == 3
+    assert _rows(tmp_path / "once") == _rows(tmp_path / "cut")
+    assert _same_params(_params(tmp_path / "once"), _params(tmp_path / "cut"))
+
+
+def test_load_policy_acts_with_its_normaliser_and_metadata(dataset: Path, tmp_path: Path) -> None:
+    from wristmimic.env.vec_env import WristMimicEnv
+
+    start_run(_spec(dataset, 1), tmp_path / "run", nthread=1, progress=False)
+    policy = load_policy(tmp_path / "run")
+    assert (policy.scene_id, policy.variant, policy.dataset_sha256) == (SID, "wristmimic", sha256_file(dataset))
+    env = WristMimicEnv.from_file(dataset, SID, num_worlds=3, nthread=1)
+    obs, _ = env.reset(seed=0)
+    a = policy.act(obs)
+    assert a.shape == (3, env.action_size) and torch.equal(a, policy.act(obs))
+    torch.testing.assert_close(a, policy.net.actor(policy.net.normalizer(obs)))
+    noisy = policy.act(obs, deterministic=False, generator=torch.Generator().manual_seed(0))
+    assert 0 < (noisy - a).abs().mean() < 0.2
+    with pytest.raises(InputError, match="features"):
+        policy.act(obs[:, :5])
+    env.close()
+
+
+def test_bad_runs_fail_with_one_line(dataset: Path, tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="no checkpoint"):
+        load_policy(tmp_path)
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(InputError, match="cannot be loaded"):
+        load_policy(tmp_path / "junk.pt")
+    with pytest.raises(InputError, match="unknown variant"):
+        start_run(TrainSpec(dataset, SID, "nope", ppo=preset("cpu", **TINY)), tmp_path / "v", progress=False)
+    with pytest.raises(InputError, match="nosuchscene"):
+        start_run(TrainSpec(dataset, "nosuchscene", ppo=preset("cpu", **TINY)), tmp_path / "s", progress=False)
+
+
+def test_resume_refuses_a_changed_dataset(dataset: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "copy.h5"
+    copy.write_bytes(dataset.read_bytes())
+    start_run(TrainSpec(copy, SID, ppo=preset("cpu", **TINY, max_frames=32)), tmp_path / "run", progress=False)
+    with open(copy, "ab") as f:
+        f.write(b"\0")
+    with pytest.raises(InputError, match="changed since the run started"):
+        resume_run(tmp_path / "run", max_frames=64, progress=False)
+
+
+def test_train_command_writes_a_run_and_resumes(dataset: Path, tmp_path: Path) -> None:
+    cli = CliRunner()
+    args = ["train", str(dataset), "--scene", SID, "--num-envs", "2", "--max-frames", "64", "-q"]
+    r = cli.invoke(app, [*args, "--out", str(tmp_path), "--seed", "3", "--nthread", "1"])
+    assert r.exit_code == 0, r.output
+    (run,) = tmp_path.iterdir()
+    assert run.name.startswith(f"{SID}-wristmimic-seed3-") and "finished at iteration 1" in r.output
+    r = cli.invoke(app, ["train", "--resume", str(run), "--max-frames", "128", "-q"])
+    assert r.exit_code == 0 and "finished at iteration 2" in r.output, r.output
+    r = cli.invoke(
+        app,
+        [
+            "train",
+            str(dataset),
+            "--scenes",
+            "all",
+            "--num-envs",
+            "2",
+            "--max-frames",
+            "64",
+            "-q",
+            "--out",
+            str(tmp_path / "all"),
+            "--nthread",
+            "1",
+        ],
+    )
+    assert r.exit_code == 0 and [p.name.split("-")[0] for p in (tmp_path / "all").iterdir()] == [SID], r.output
+    bad = cli.invoke(app, ["train", str(dataset), "--scenes", "some", "-q"])
+    assert bad.exit_code == 1 and "error:" in bad.output and "'all'" in bad.output
+    bad = cli.invoke(app, ["train", str(dataset), "--scene", SID, "--preset", "huge", "-q"])
+    assert bad.exit_code == 1 and "unknown preset" in bad.output
+
+
+def test_learning_curve_script_plots_a_run(dataset: Path, tmp_path: Path) -> None:
+    start_run(_spec(dataset, 2), tmp_path / "run", nthread=1, progress=False)
+    script = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "learning_curve.py"))
+    out = script["plot"](tmp_path / "run", tmp_path / "reports" / "curve.png", 5)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -1,0 +1,69 @@
+"""``wristmimic train DATASET.h5 --scene SEQ``: PPO per scene, or ``--resume RUN_DIR``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from wristmimic.cli.errors import user_errors
+from wristmimic.errors import InputError
+
+
+def _scenes(dataset: Path, scene: list[str] | None, scenes: str | None) -> list[str]:
+    from wristmimic.format.reader import open_dataset
+
+    if scenes is not None and scenes != "all":
+        raise InputError(None, "--scenes", f"{scenes!r}", "'all' (use --scene SEQ for one scene)")
+    if bool(scene) == (scenes is not None):
+        raise InputError(None, "--scene", "give either --scene SEQ (repeatable) or --scenes all")
+    if scene:
+        return list(scene)
+    with open_dataset(dataset) as ds:
+        return list(ds.sequence_ids)
+
+
+def train_cmd(
+    dataset: Path = typer.Argument(None, help="Canonical HDF5 file (from `wristmimic convert`)."),
+    scene: list[str] = typer.Option(None, "--scene", "-s", help="Sequence id to train (repeatable)."),
+    scenes: str = typer.Option(None, "--scenes", help="'all': train every sequence of the file in turn."),
+    variant: str = typer.Option("wristmimic", "--variant", help="Environment variant (see wristmimic.env.config)."),
+    preset: str = typer.Option("cpu", "--preset", help="PPO preset: cpu (2-core machine) or paper (2,048 envs)."),
+    max_frames: int = typer.Option(None, "--max-frames", help="Training budget in env frames (default: the preset's)."),
+    num_envs: int = typer.Option(None, "--num-envs", help="Parallel worlds (default: the preset's)."),
+    ref_frames: int = typer.Option(None, "--ref-frames", help="Use only the first N reference frames (short task)."),
+    out: Path = typer.Option(Path("runs"), "--out", "-o", help="Parent folder of the run folders."),
+    seed: int = typer.Option(0, "--seed", help="Seed of networks, action noise, minibatches and start frames."),
+    resume: Path = typer.Option(None, "--resume", help="Continue this run folder exactly where it stopped."),
+    nthread: int = typer.Option(None, "--nthread", help="Physics threads (default: all cores)."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Train one PPO policy per scene; each run folder gets config.json, metrics.csv and checkpoint.pt.
+
+    Ctrl-C finishes the current iteration, saves a checkpoint and exits; --resume continues bit-for-bit.
+
+    Example: wristmimic train datasets/omomo.h5 --scene sub2_largetable_000 --variant wristmimic --preset cpu
+
+    Example: wristmimic train --resume runs/sub2_largetable_000-wristmimic-seed0-20261123-120000
+    """
+    from wristmimic.rl.config import preset as make_preset
+    from wristmimic.rl.train import TrainSpec, default_run_dir, resume_run, start_run
+
+    with user_errors():
+        if resume is not None:
+            if scene or scenes or dataset:
+                raise InputError(None, "--resume", "takes dataset, scene and config from the run folder")
+            r = resume_run(resume, max_frames=max_frames, nthread=nthread, progress=not quiet)
+            typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
+            return
+        if dataset is None:
+            raise InputError(None, "DATASET", "missing", "a canonical .h5 file (or --resume RUN_DIR)")
+        if not dataset.is_file():
+            raise InputError(dataset, None, "file not found")
+        ppo = make_preset(preset, max_frames=max_frames, num_envs=num_envs)
+        for sid in _scenes(dataset, scene, scenes):
+            spec = TrainSpec(dataset, sid, variant, seed, preset, ppo, ref_frames=ref_frames)
+            r = start_run(spec, default_run_dir(out, sid, variant, seed), nthread=nthread, progress=not quiet)
+            typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
+            if r.status == "interrupted":
+                raise typer.Exit(code=130)

@@ -1,0 +1,239 @@
+"""Pipelines: ``wristmimic run pipelines/NAME.toml`` runs convert -> train -> evaluate -> report.
+
+Each stage is registered in :data:`STAGES` by name; a stage does its work in units (one converted file, one
+trained scene) through :meth:`Context.cached`, which skips a unit whose input fingerprint (content hashes of its
+input files, its parameters, the code version) and output hashes match the last run. The record lives in
+``<work_dir>/pipeline_state.json``. Stages without an implementation yet are registered with ``run=None`` and
+reported as "not available yet".
+
+A pipeline file (paths relative to the current folder)::
+
+    [pipeline]
+    name = "omomo"                       # work_dir defaults to runs/pipelines/<name>
+    [convert]
+    format = "intermimic"                # or "skillmimic-parahome"
+    source = "../shared/data/intermimic_omomo"
+    output = "datasets/omomo.h5"
+    [train]
+    scenes = ["sub2_largetable_000"]     # or "all"
+    variant = "wristmimic"
+    preset = "cpu"
+    seed = 0
+    [train.ppo]                          # optional overrides of the preset
+    max_frames = 5_000_000
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import wristmimic
+from wristmimic.errors import InputError
+from wristmimic.safe_io import atomic_output, sha256_file
+
+STATE_FILE = "pipeline_state.json"
+
+
+@dataclass
+class Context:
+    """What stages share: the work folder, the cache record, outputs of earlier stages, the summary."""
+
+    spec_path: Path
+    work_dir: Path
+    progress: bool = True
+    nthread: int | None = None
+    outputs: dict[str, Any] = field(default_factory=dict)
+    """Values later stages read, e.g. ``outputs["dataset"]`` (the converted file)."""
+    summary: list[tuple[str, str]] = field(default_factory=list)
+    """(unit, status) with status ``ran``, ``up to date`` or ``not available yet``."""
+    echo: Callable[[str], None] = print
+    state: dict[str, Any] = field(default_factory=dict)
+
+    def cached(self, unit: str, inputs: dict[str, Any], outputs: list[Path], work: Callable[[], None]) -> bool:
+        """Run ``work`` unless ``unit`` already ran with the same ``inputs`` and its ``outputs`` are unchanged.
+        Returns True when work was done."""
+        key = hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()
+        rec = self.state.get(unit)
+        if rec and rec["key"] == key and rec["outputs"] == {str(o): _hash_path(o) for o in outputs}:
+            self._note(unit, "up to date")
+            return False
+        self.echo(f"{unit}: running")
+        work()
+        self.state[unit] = {"key": key, "outputs": {str(o): _hash_path(o) for o in outputs}}
+        self._save_state()
+        self._note(unit, "ran")
+        return True
+
+    def _note(self, unit: str, status: str) -> None:
+        self.summary.append((unit, status))
+        self.echo(f"{unit}: {status}")
+
+    def _save_state(self) -> None:
+        with atomic_output(self.work_dir / STATE_FILE) as tmp:
+            tmp.write_text(json.dumps(self.state, indent=2, sort_keys=True) + "\n")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """A pipeline stage: ``run(ctx, params)`` with the TOML table's ``params``; ``run=None``: not available."""
+
+    name: str
+    run: Callable[[Context, dict[str, Any]], None] | None
+    keys: frozenset[str] = frozenset()
+    """Accepted keys of the stage's TOML table."""
+    note: str = ""
+
+
+STAGES: dict[str, Stage] = {}
+"""Stage registry in execution order."""
+
+
+def register(name: str, keys: set[str], note: str = "") -> Callable:
+    """Decorator: register ``run(ctx, params)`` as stage ``name``."""
+
+    def deco(fn: Callable[[Context, dict[str, Any]], None]) -> Callable:
+        STAGES[name] = Stage(name, fn, frozenset(keys), note)
+        return fn
+
+    return deco
+
+
+def _hash_path(p: Path) -> str | None:
+    """sha256 of a file, of a folder's files (names and contents), None if absent."""
+    p = Path(p)
+    if p.is_file():
+        return sha256_file(p)
+    if not p.is_dir():
+        return None
+    h = hashlib.sha256()
+    for f in sorted(q for q in p.rglob("*") if q.is_file()):
+        h.update(f"{f.relative_to(p).as_posix()}\0{sha256_file(f)}\n".encode())
+    return h.hexdigest()
+
+
+# ----------------------------------------------------------------------------------------------- stages
+
+
+@register("convert", {"format", "source", "output", "sequences", "hull_cache"})
+def convert_stage(ctx: Context, p: dict[str, Any]) -> None:
+    """Source folder -> canonical HDF5 (``outputs["dataset"]``)."""
+    from wristmimic.convert.common import ConvertOptions
+    from wristmimic.convert.intermimic import convert_intermimic
+    from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
+
+    converters = {"intermimic": convert_intermimic, "skillmimic-parahome": convert_skillmimic_parahome}
+    fmt, src, out = p.get("format"), Path(_require(p, "convert", "source")), Path(_require(p, "convert", "output"))
+    if fmt not in converters:
+        raise InputError(ctx.spec_path, "convert.format", f"{fmt!r}", f"one of {', '.join(converters)}")
+    if not src.is_dir():
+        raise InputError(ctx.spec_path, "convert.source", f"folder {src} not found")
+    sequences = p.get("sequences")
+    cache = Path(p["hull_cache"]) if p.get("hull_cache") else None
+
+    def work() -> None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        opts = ConvertOptions(hull_cache_dir=cache, show_progress=ctx.progress)
+        pick = {"sequences": sequences} if fmt == "intermimic" else {"clips": sequences}
+        converters[fmt](src, out, options=opts, **pick)
+
+    inputs = {"format": fmt, "source": _hash_path(src), "sequences": sequences, "code": wristmimic.__version__}
+    ctx.cached(f"convert {out}", inputs, [out], work)
+    ctx.outputs["dataset"] = out
+
+
+@register("train", {"dataset", "scenes", "variant", "preset", "seed", "ref_frames", "ppo"})
+def train_stage(ctx: Context, p: dict[str, Any]) -> None:
+    """One PPO run per scene in ``<work_dir>/runs/<scene>-<variant>-seed<seed>-<key>``; an interrupted run resumes."""
+    from wristmimic.format.reader import open_dataset
+    from wristmimic.rl.config import preset, to_jsonable
+    from wristmimic.rl.train import TrainSpec, resume_run, start_run
+
+    dataset = Path(p.get("dataset") or ctx.outputs.get("dataset") or _require(p, "train", "dataset"))
+    if not dataset.is_file():
+        raise InputError(ctx.spec_path, "train.dataset", f"file {dataset} not found")
+    scenes = p.get("scenes", "all")
+    if scenes == "all":
+        with open_dataset(dataset) as ds:
+            scenes = list(ds.sequence_ids)
+    variant, seed, name = p.get("variant", "wristmimic"), int(p.get("seed", 0)), p.get("preset", "cpu")
+    ppo = preset(name, **p.get("ppo", {}))
+    sha = sha256_file(dataset)
+    for scene in scenes:
+        spec = TrainSpec(dataset, scene, variant, seed, name, ppo, ref_frames=p.get("ref_frames"))
+        inputs = {"dataset_sha256": sha, "scene": scene, "variant": variant, "seed": seed}
+        inputs |= {"ppo": to_jsonable(ppo), "ref_frames": spec.ref_frames, "code": wristmimic.__version__}
+        key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:8]
+        run_dir = ctx.work_dir / "runs" / f"{scene}-{variant}-seed{seed}-{key}"
+
+        def work(spec: TrainSpec = spec, run_dir: Path = run_dir) -> None:
+            kw = {"nthread": ctx.nthread, "progress": ctx.progress}
+            go = resume_run if (run_dir / "checkpoint.pt").exists() else start_run
+            r = go(run_dir, **kw) if go is resume_run else start_run(spec, run_dir, **kw)
+            if r.status == "interrupted":
+                ctx.echo(f"{run_dir}: interrupted, checkpoint saved; run the pipeline again to resume")
+                raise KeyboardInterrupt
+            ctx.echo(f"{run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
+
+        ctx.cached(f"train {scene}", inputs, [run_dir / "checkpoint.pt"], work)
+        ctx.outputs.setdefault("runs", []).append(run_dir)
+
+
+STAGES["evaluate"] = Stage("evaluate", None, note="evaluation (success rate, object errors) is a later issue")
+STAGES["report"] = Stage("report", None, note="tables and plots are a later issue")
+
+
+# ---------------------------------------------------------------------------------------------- running
+
+
+def _require(p: dict[str, Any], stage: str, key: str) -> Any:
+    if key not in p:
+        raise InputError(None, f"[{stage}]", f"missing key {key!r}")
+    return p[key]
+
+
+def load_spec(path: Path) -> dict[str, Any]:
+    """Read and check a pipeline TOML: known tables only, known keys per stage."""
+    try:
+        spec = tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise InputError(path, None, "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(path, None, f"not valid TOML ({exc})") from None
+    for table, params in spec.items():
+        if table == "pipeline":
+            continue
+        if table not in STAGES:
+            raise InputError(path, f"[{table}]", "unknown stage", f"one of pipeline, {', '.join(STAGES)}")
+        stage = STAGES[table]
+        unknown = sorted(set(params) - stage.keys) if stage.run else []
+        if unknown:
+            raise InputError(path, f"[{table}]", f"unknown key(s) {', '.join(unknown)}", ", ".join(sorted(stage.keys)))
+    return spec
+
+
+def run_pipeline(
+    path: Path, progress: bool = True, nthread: int | None = None, echo: Callable[[str], None] = print
+) -> Context:
+    """Run every stage named in the pipeline file, in registry order; returns the context with the summary."""
+    spec = load_spec(path)
+    meta = spec.get("pipeline", {})
+    work_dir = Path(meta.get("work_dir", Path("runs") / "pipelines" / meta.get("name", Path(path).stem)))
+    work_dir.mkdir(parents=True, exist_ok=True)
+    state_file = work_dir / STATE_FILE
+    state = json.loads(state_file.read_text()) if state_file.exists() else {}
+    ctx = Context(Path(path), work_dir, progress, nthread, echo=echo, state=state)
+    for name, stage in STAGES.items():
+        if name not in spec:
+            continue
+        if stage.run is None:
+            ctx._note(name, "not available yet")
+            echo(f"  ({stage.note}; skipped)")
+            continue
+        stage.run(ctx, spec[name])
+    return ctx

@@ -1,0 +1,154 @@
+"""Training logs: per-iteration episode statistics, ``metrics.csv`` rows and the live progress bar."""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import torch
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from wristmimic.env.terminations import REASONS
+from wristmimic.safe_io import atomic_output
+
+TIME_COLUMNS = ("seconds", "frames_per_s")
+"""Wall-clock columns of ``metrics.csv``: the only ones that differ between two runs with the same seed."""
+
+
+class EpisodeStats:
+    """Accumulates one iteration's step and episode statistics over all worlds.
+
+    Attributes:
+        num_frames: frames of the reference; an episode whose last frame is ``num_frames - 1`` succeeded.
+        episodes_total, successes_total: counts since the start of training (kept in checkpoints).
+    """
+
+    def __init__(self, num_frames: int):
+        self.num_frames = int(num_frames)
+        self.episodes_total = 0
+        self.successes_total = 0
+        self._reset_iteration()
+
+    def _reset_iteration(self) -> None:
+        self._steps = 0
+        self._reward = 0.0
+        self._terms: dict[str, float] = {}
+        self._lengths: list[torch.Tensor] = []
+        self._success = 0
+        self._reasons = {name: 0 for code, name in REASONS.items() if code != 0}
+
+    def record(self, reward: torch.Tensor, terminated: torch.Tensor, info: dict) -> None:
+        """One environment step of every world (``info`` as returned by ``WristMimicEnv.step``)."""
+        self._steps += 1
+        self._reward += float(reward.mean())
+        for k, v in info["terms"].items():
+            if k.startswith("reward/"):
+                self._terms[k] = self._terms.get(k, 0.0) + float(v.float().mean())
+        done = terminated | info["time_outs"]
+        if done.any():
+            self._lengths.append(info["episode_frames"][done])
+            success = int((info["time_outs"] & (info["frame"] >= self.num_frames - 1)).sum())
+            self._success += success
+            self.successes_total += success
+            self.episodes_total += int(done.sum())
+        for code in info["termination_reason"][terminated].tolist():
+            name = REASONS.get(int(code), str(code))
+            self._reasons[name] = self._reasons.get(name, 0) + 1
+
+    def flush(self) -> dict[str, float]:
+        """This iteration's means (NaN where no episode ended), then start a new iteration."""
+        lengths = torch.cat(self._lengths).float() if self._lengths else torch.zeros(0)
+        n = len(lengths)
+        row = {
+            "reward_mean": self._reward / max(self._steps, 1),
+            "episode_length_mean": float(lengths.mean()) if n else math.nan,
+            "episodes": n,
+            "success_rate": self._success / n if n else math.nan,
+            "success_rate_total": self.successes_total / self.episodes_total if self.episodes_total else math.nan,
+        }
+        row.update({k: v / max(self._steps, 1) for k, v in sorted(self._terms.items())})
+        row.update({f"termination/{k}": v for k, v in self._reasons.items()})
+        self._reset_iteration()
+        return row
+
+    def state_dict(self) -> dict[str, int]:
+        return {"episodes_total": self.episodes_total, "successes_total": self.successes_total}
+
+    def load_state_dict(self, state: dict[str, int]) -> None:
+        self.episodes_total, self.successes_total = int(state["episodes_total"]), int(state["successes_total"])
+
+
+def _fmt(v: object) -> str:
+    return repr(float(v)) if isinstance(v, float) else str(v)
+
+
+class MetricsCsv:
+    """``metrics.csv``: one row per iteration, header from the first row; on resume, rows after the checkpoint's
+    iteration (written before a crash) are dropped so the file continues exactly."""
+
+    def __init__(self, path: Path, keep_until: int | None = None):
+        self.path = path
+        self.columns: list[str] | None = None
+        if keep_until is not None and path.exists():
+            with open(path, newline="") as f:
+                rows = list(csv.reader(f))
+            if rows:
+                self.columns = rows[0]
+                kept = [r for r in rows[1:] if int(r[0]) <= keep_until]
+                with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
+                    csv.writer(f).writerows([rows[0], *kept])
+
+    def write(self, row: dict[str, object]) -> None:
+        new = self.columns is None
+        if new:
+            self.columns = list(row)
+        with open(self.path, "w" if new else "a", newline="") as f:
+            w = csv.writer(f)
+            if new:
+                w.writerow(self.columns)
+            w.writerow([_fmt(row.get(c, "")) for c in self.columns])  # type: ignore[union-attr]
+
+
+class _NoBar:
+    def update(self, frames: int, row: dict[str, float]) -> None:
+        return None
+
+
+class _Bar:
+    def __init__(self, progress: Progress, task: int):
+        self._p, self._task = progress, task
+
+    def update(self, frames: int, row: dict[str, float]) -> None:
+        success = row["success_rate_total"]
+        self._p.update(
+            self._task,
+            completed=frames,
+            fps=f"{row['frames_per_s']:,.0f}",
+            reward=f"{row['reward_mean']:.3f}",
+            length=f"{row['episode_length_mean']:.1f}",
+            success="-" if math.isnan(success) else f"{100 * success:.1f}%",
+        )
+
+
+@contextlib.contextmanager
+def train_progress(description: str, start: int, total: int, enabled: bool = True) -> Iterator[_Bar | _NoBar]:
+    """A rich bar over frames with frames/s, mean reward, mean episode length and success so far (stderr)."""
+    if not enabled:
+        yield _NoBar()
+        return
+    columns = (
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed:,}/{task.total:,} frames"),
+        TextColumn("{task.fields[fps]} fps  reward {task.fields[reward]}  ep len {task.fields[length]}"),
+        TextColumn("success {task.fields[success]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=Console(stderr=True)) as p:
+        task = p.add_task(description, total=total, completed=start, fps="-", reward="-", length="-", success="-")
+        yield _Bar(p, task)

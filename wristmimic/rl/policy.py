@@ -1,0 +1,75 @@
+"""A trained policy for evaluation: ``load_policy(run_dir_or_checkpoint).act(obs)``."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from wristmimic.errors import InputError
+from wristmimic.rl.checkpoint import load_checkpoint
+from wristmimic.rl.config import PPOConfig, from_jsonable
+from wristmimic.rl.networks import ActorCritic
+
+
+@dataclass
+class Policy:
+    """A finished policy with its observation normaliser inside, and where it came from.
+
+    >>> policy = load_policy("runs/sub2_largetable_000-wristmimic-seed0-20261123-120000")
+    >>> actions = policy.act(obs)  # raw observations (N, O) from WristMimicEnv -> actions (N, A)
+    """
+
+    net: ActorCritic
+    scene_id: str
+    variant: str
+    dataset_sha256: str
+    seed: int
+    iteration: int
+    frames: int
+    config: dict
+
+    @property
+    def observation_size(self) -> int:
+        return self.net.obs_size
+
+    @property
+    def action_size(self) -> int:
+        return self.net.action_size
+
+    @torch.no_grad()
+    def act(
+        self, obs: torch.Tensor, deterministic: bool = True, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
+        """Actions for raw observations: the mean, or a sample with the policy's fixed sigma."""
+        if obs.shape[-1] != self.net.obs_size:
+            raise InputError(None, "obs", f"{obs.shape[-1]} features", f"{self.net.obs_size} (the training scene's)")
+        mu = self.net.actor(self.net.normalizer(obs))
+        if deterministic:
+            return mu
+        return mu + torch.exp(self.net.log_std) * torch.randn(mu.shape, generator=generator)
+
+
+def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
+    """The policy of a run folder (its ``checkpoint.pt``) or of a checkpoint file, on the CPU, in eval mode."""
+    state = load_checkpoint(run_dir_or_checkpoint)
+    config = json.loads(state["config"])
+    ppo = from_jsonable(PPOConfig, config["ppo"])
+    weights = state["policy"]
+    obs_size, action_size = weights["normalizer.mean"].shape[0], weights["log_std"].shape[0]
+    net = ActorCritic(obs_size, action_size, ppo.actor_hidden, ppo.critic_hidden, ppo.log_std, ppo.obs_clip)
+    net.load_state_dict(weights)
+    net.eval()
+    meta = state["metadata"]
+    return Policy(
+        net=net,
+        scene_id=meta["scene"],
+        variant=meta["variant"],
+        dataset_sha256=meta["dataset_sha256"],
+        seed=int(meta["seed"]),
+        iteration=int(state["iteration"]),
+        frames=int(state["frames"]),
+        config=config,
+    )

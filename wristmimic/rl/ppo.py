@@ -1,0 +1,101 @@
+"""PPO: generalised advantage estimation and the clipped-surrogate update (CleanRL's order, rsl_rl's split)."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from wristmimic.rl.config import PPOConfig
+from wristmimic.rl.networks import ActorCritic
+from wristmimic.rl.storage import RolloutStorage
+
+
+def compute_gae(
+    rewards: torch.Tensor,
+    values: torch.Tensor,
+    terminated: torch.Tensor,
+    time_outs: torch.Tensor,
+    last_values: torch.Tensor,
+    gamma: float,
+    lam: float,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Advantages and returns of one rollout; all ``(H, N)`` except ``last_values`` ``(N,)`` = V(s_H).
+
+    Auto-reset replaces the last observation of an ended episode, so on a time-out the value of the state
+    before the last step stands in for the lost final state (rsl_rl's approximation); terminations get none.
+    """
+    H = rewards.shape[0]
+    rewards = rewards + gamma * values * time_outs  # r~_t = r_t + gamma V(s_t) on time-outs, else r_t
+    not_done = 1.0 - torch.maximum(terminated, time_outs)  # (1 - d_t): the episode continues into s_{t+1}
+    advantages = torch.zeros_like(rewards)
+    gae = torch.zeros_like(last_values)  # A_H = 0
+    for t in reversed(range(H)):
+        next_values = last_values if t == H - 1 else values[t + 1]  # V(s_{t+1})
+        delta = rewards[t] + gamma * next_values * not_done[t] - values[t]  # d_t = r~_t + g V(s_t+1)(1-d_t) - V(s_t)
+        gae = delta + gamma * lam * not_done[t] * gae  # A_t = d_t + gamma lambda (1 - d_t) A_{t+1}
+        advantages[t] = gae
+    returns = advantages + values  # R_t = A_t + V(s_t)
+    return advantages, returns
+
+
+def bounds_loss(mu: torch.Tensor, bound: float) -> torch.Tensor:
+    """Soft action bound: mean over samples of sum_i max(|mu_i| - bound, 0)^2."""
+    return (mu.abs() - bound).clamp_min(0.0).square().sum(-1).mean()
+
+
+class PPO:
+    """Owns the policy's optimiser; :meth:`update` runs the epochs x minibatches of one rollout."""
+
+    def __init__(self, policy: ActorCritic, cfg: PPOConfig):
+        self.policy, self.cfg = policy, cfg
+        params = [*policy.actor.parameters(), *policy.critic.parameters()]
+        self.optimizer = torch.optim.Adam(params, lr=cfg.learning_rate)
+
+    def compute_returns(self, storage: RolloutStorage, last_values: torch.Tensor) -> None:
+        adv, ret = compute_gae(
+            storage.rewards,
+            storage.values,
+            storage.terminated,
+            storage.time_outs,
+            last_values,
+            self.cfg.gamma,
+            self.cfg.lam,
+        )
+        storage.set_returns(adv, ret)
+
+    def update(self, storage: RolloutStorage, generator: torch.Generator) -> dict[str, float]:
+        """Minibatch epochs over the rollout; returns mean losses and diagnostics under ``loss/...``."""
+        c, pi = self.cfg, self.policy
+        sums: dict[str, float] = {}
+        n = 0
+        for mb in storage.minibatches(c.minibatch_size, c.epochs, generator):
+            adv = mb["advantages"]
+            if c.normalize_advantage:
+                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+            mu = pi.actor(mb["observations"])
+            log_ratio = pi.log_prob(mu, mb["actions"]) - mb["log_probs"]
+            ratio = log_ratio.exp()
+            policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - c.clip, 1 + c.clip)).mean()
+            value_loss = 0.5 * (pi.value(mb["observations"]) - mb["returns"]).square().mean()
+            b_loss = bounds_loss(mu, c.action_bound)
+            loss = policy_loss + c.value_coef * value_loss + c.bounds_loss_coef * b_loss
+            self.optimizer.zero_grad()
+            loss.backward()
+            actor_norm = nn.utils.clip_grad_norm_(pi.actor.parameters(), c.max_grad_norm)
+            critic_norm = nn.utils.clip_grad_norm_(pi.critic.parameters(), c.max_grad_norm)
+            self.optimizer.step()
+            with torch.no_grad():
+                stats = {
+                    "loss/policy": policy_loss,
+                    "loss/value": value_loss,
+                    "loss/bounds": b_loss,
+                    "loss/total": loss,
+                    "loss/approx_kl": ((ratio - 1) - log_ratio).mean(),  # k3 estimator of KL(old || new)
+                    "loss/clip_fraction": ((ratio - 1).abs() > c.clip).float().mean(),
+                    "loss/grad_norm_actor": actor_norm,
+                    "loss/grad_norm_critic": critic_norm,
+                }
+            for k, v in stats.items():
+                sums[k] = sums.get(k, 0.0) + float(v.detach())
+            n += 1
+        return {k: v / n for k, v in sums.items()}

@@ -1,0 +1,166 @@
+"""Start or resume a training run of one scene: run folder, ``config.json``, environment, :class:`Runner`.
+
+A run folder holds ``config.json`` (everything that defines the run), ``metrics.csv`` and ``checkpoint.pt``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import wristmimic
+from wristmimic.env.config import VARIANTS, EnvConfig, variant_config
+from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.errors import InputError
+from wristmimic.format.reader import open_dataset
+from wristmimic.rl.checkpoint import load_checkpoint
+from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, to_jsonable
+from wristmimic.rl.runner import Runner
+from wristmimic.safe_io import atomic_output, sha256_file
+from wristmimic.scene import SceneConfig
+
+
+@dataclass
+class TrainSpec:
+    """What defines a run (written to ``config.json``)."""
+
+    dataset: Path
+    """Canonical HDF5 file."""
+    scene: str
+    """Sequence id to imitate."""
+    variant: str = "wristmimic"
+    """Environment variant (``wristmimic.env.config.VARIANTS``)."""
+    seed: int = 0
+    """Seeds the networks, action noise, minibatch order and the environment's start frames."""
+    preset: str = "cpu"
+    """Name of the PPO preset the config started from."""
+    ppo: PPOConfig = field(default_factory=lambda: preset("cpu"))
+    env: EnvConfig | None = None
+    """Environment config; None: ``variant_config(variant)``."""
+    scene_config: SceneConfig = field(default_factory=SceneConfig)
+    ref_frames: int | None = None
+    """Keep only the first frames of the reference (a short task); None: the whole sequence."""
+
+
+@dataclass
+class TrainResult:
+    run_dir: Path
+    status: str
+    """``finished``, ``interrupted`` or ``up to date`` (nothing left to train)."""
+    iteration: int
+    frames: int
+
+
+def default_run_dir(out: Path, scene: str, variant: str, seed: int) -> Path:
+    """``OUT/<scene>-<variant>-seed<seed>-<YYYYmmdd-HHMMSS>``."""
+    return Path(out) / f"{scene}-{variant}-seed{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def git_commit(start: Path | None = None) -> str | None:
+    """The checked-out commit, read from ``.git`` files (no git process); None outside a checkout."""
+    here = (start or Path(wristmimic.__file__)).resolve()
+    for d in [here, *here.parents]:
+        head = d / ".git" / "HEAD"
+        if head.is_file():
+            ref = head.read_text().strip()
+            if not ref.startswith("ref: "):
+                return ref
+            name = ref[5:]
+            loose = d / ".git" / name
+            if loose.is_file():
+                return loose.read_text().strip()
+            packed = d / ".git" / "packed-refs"
+            for line in packed.read_text().splitlines() if packed.is_file() else []:
+                if line.endswith(" " + name):
+                    return line.split()[0]
+            return None
+    return None
+
+
+def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any]:
+    return {
+        "dataset": {"path": str(Path(spec.dataset).resolve()), "sha256": sha},
+        "scene": spec.scene,
+        "variant": spec.variant,
+        "seed": spec.seed,
+        "preset": spec.preset,
+        "ref_frames": spec.ref_frames,
+        "ppo": to_jsonable(spec.ppo),
+        "env": to_jsonable(env_cfg),
+        "scene_config": to_jsonable(spec.scene_config),
+        "code": {"version": wristmimic.__version__, "git_commit": git_commit()},
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def _build(config: dict[str, Any], run_dir: Path, nthread: int | None) -> Runner:
+    ppo = from_jsonable(PPOConfig, config["ppo"])
+    env_cfg = from_jsonable(EnvConfig, config["env"])
+    env = WristMimicEnv.from_file(
+        config["dataset"]["path"],
+        config["scene"],
+        num_worlds=ppo.num_envs,
+        config=env_cfg,
+        scene_config=from_jsonable(SceneConfig, config["scene_config"]),
+        seed=config["seed"],
+        nthread=nthread,
+        max_frames=config["ref_frames"],
+    )
+    meta = {
+        "scene": config["scene"],
+        "variant": config["variant"],
+        "dataset_sha256": config["dataset"]["sha256"],
+        "seed": config["seed"],
+    }
+    return Runner(env, ppo, config["seed"], run_dir, dumps(config), meta)
+
+
+def _check_scene(dataset: Path, scene: str) -> None:
+    with open_dataset(dataset) as ds:
+        ds.sequence(scene)  # InputError naming the known ids
+
+
+def start_run(spec: TrainSpec, run_dir: Path, nthread: int | None = None, progress: bool = True) -> TrainResult:
+    """Create ``run_dir`` (must not hold a run yet), write ``config.json`` and train to ``spec.ppo.max_frames``."""
+    run_dir = Path(run_dir)
+    if (run_dir / "config.json").exists():
+        raise InputError(run_dir, None, "already holds a run", "a new folder (or use --resume)")
+    _check_scene(Path(spec.dataset), spec.scene)
+    if spec.variant not in VARIANTS:
+        raise InputError(None, "variant", f"unknown variant {spec.variant!r}", f"one of {', '.join(VARIANTS)}")
+    env_cfg = spec.env or variant_config(spec.variant)
+    config = _config_dict(spec, env_cfg, sha256_file(spec.dataset))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_output(run_dir / "config.json") as tmp:
+        tmp.write_text(dumps(config) + "\n")
+    runner = _build(config, run_dir, nthread)
+    try:
+        status = runner.learn(spec.ppo.max_frames, progress)
+    finally:
+        runner.env.close()
+    return TrainResult(run_dir, status, runner.iteration, runner.frames)
+
+
+def resume_run(
+    run_dir: Path, max_frames: int | None = None, nthread: int | None = None, progress: bool = True
+) -> TrainResult:
+    """Continue a run from its ``checkpoint.pt`` exactly where it stopped (to ``max_frames`` if given)."""
+    run_dir = Path(run_dir)
+    state = load_checkpoint(run_dir)
+    config = json.loads(state["config"])
+    dataset = Path(config["dataset"]["path"])
+    if not dataset.is_file():
+        raise InputError(dataset, None, "dataset of the run not found", "the file recorded in config.json")
+    if sha256_file(dataset) != config["dataset"]["sha256"]:
+        raise InputError(dataset, None, "changed since the run started (sha256 differs)", "the same file")
+    runner = _build(config, run_dir, nthread)
+    try:
+        runner.load_state_dict(state)
+        budget = max_frames if max_frames is not None else config["ppo"]["max_frames"]
+        status = runner.learn(budget, progress) if runner.frames < budget else "up to date"
+    finally:
+        runner.env.close()
+    return TrainResult(run_dir, status, runner.iteration, runner.frames)
