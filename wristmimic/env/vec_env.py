@@ -25,7 +25,7 @@ from wristmimic.env.observations import RefFrame, SimState, goal_obs, heading_in
 from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import RewardInputs, compute_reward
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
-from wristmimic.env.torch_math import quat_rotate
+from wristmimic.env.torch_math import quat_angle, quat_rotate
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
 from wristmimic.sim.backend import CpuRolloutBackend, PhysicsBackend
@@ -294,6 +294,7 @@ class WristMimicEnv:
             "episode_frames": self.steps.clone(),
             "episode_start": self.start.clone(),
             "frame": self.frame.clone(),
+            "eval": self._eval_errors(s, rf),
         }
         self._prev_joint_vel = s.joint_vel
         self._prev_obj_vel = torch.cat([s.obj_linvel, s.obj_angvel], -1)
@@ -302,6 +303,21 @@ class WristMimicEnv:
             self._reset_worlds(ids)
             s = None
         return self._observe(s), reward, terminated, truncated, info
+
+    def _eval_errors(self, s: SimState, rf: RefFrame) -> dict[str, torch.Tensor]:
+        """Per-world tracking errors of this step, from the state before any auto-reset (for evaluation):
+        ``obj_pos`` (m) and ``obj_rot`` (rad) mean over dynamic objects, ``wrist_pos`` (m) and ``wrist_rot``
+        (rad) mean over both wrists, all (N,); ``sim_hand`` and ``ref_hand`` (N, 2) bool hand-object contact."""
+        w = self.sets.wrists
+        hands = [s.contact_obj[:, h].any(1) for h in self.hands]
+        return {
+            "obj_pos": torch.linalg.vector_norm(s.obj_pos - rf.obj_pos, dim=-1).mean(-1),
+            "obj_rot": quat_angle(rf.obj_quat, s.obj_quat).mean(-1),
+            "wrist_pos": torch.linalg.vector_norm(s.body_pos[:, w] - rf.body_pos[:, w], dim=-1).mean(-1),
+            "wrist_rot": quat_angle(rf.body_quat[:, w], s.body_quat[:, w]).mean(-1),
+            "sim_hand": torch.stack(hands, 1),
+            "ref_hand": rf.hand,
+        }
 
     def _window(self) -> tuple[torch.Tensor, torch.Tensor]:
         t_c = torch.full((self.num_worlds,), self.ref.t_c, dtype=torch.long)

@@ -1,0 +1,383 @@
+"""``evaluate``: run a protocol's trials for one policy, keep them interrupt-safe, write tables and a summary.
+
+Output folder (default ``<run_dir>/eval/<protocol>``)::
+
+    eval.json                         settings (checked when a rerun resumes)
+    parts/<scene>/trials-<a>-<b>.parquet   completed trials a..b-1, each written atomically as it completes
+    <scene>.parquet                   all trials, sorted by trial (see metrics.TRIAL_COLUMNS)
+    summary.json, summary.csv         per-scene success rate (Wilson 95 % interval), errors, terminations
+    timing.json                       wall time and trials/s of the last session (the only non-deterministic file)
+
+A rerun of the same command resumes after the last contiguous completed trial; because every trial is a pure
+function of its seed, the final files are identical to an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from wristmimic.env.config import WristThresholds
+from wristmimic.env.terminations import REASONS
+from wristmimic.errors import InputError, WristmimicError
+from wristmimic.evaluate.metrics import TRIAL_COLUMNS, wilson_interval
+from wristmimic.evaluate.policy import EvalPolicy
+from wristmimic.evaluate.protocol import NOISE_MODES, Protocol, Split, available, load_split
+from wristmimic.evaluate.trials import Records, TrialSettings, make_env, run_trials
+from wristmimic.safe_io import atomic_output, sha256_file
+
+EVAL_FORMAT, EVAL_VERSION = "wristmimic-eval", 1
+DATASET_LABELS = {"omomo": "OMOMO", "parahome": "ParaHome"}
+METHOD_LABELS = {
+    "wristmimic": "WristMimic (Ours)",
+    "decoupled": "Decoupled (No Wrist Constraints)",
+    "reward-modulation-only": "+ reward weight modulation only",
+    "reset-only": "+ phase specific reset only",
+    "finger-guidance": "Ours + Finger Guidance",
+    "intermimic": "InterMimic",
+}
+"""Display names of the environment variants, as in the paper's tables."""
+TERMINATION_NAMES = [REASONS[k] for k in sorted(REASONS) if k != 0]
+SUMMARY_COLUMNS = [
+    "scene", "dataset", "dataset_label", "split", "method", "variant", "protocol", "noise", "trials", "successes",
+    "success_rate", "success_ci_low", "success_ci_high", "obj_pos_err_cm", "obj_rot_err_deg", "wrist_pos_err_cm",
+    "wrist_rot_err_deg", "contact_ratio", "completion_rate", "frames_completed_mean", "frames_total",
+    *(f"terminated_{n}" for n in TERMINATION_NAMES),
+]  # fmt: skip
+"""Columns of ``summary.csv`` in order."""
+
+
+class EvalInterrupted(WristmimicError):
+    """Ctrl-C during an evaluation; completed trials were kept."""
+
+    def __init__(self, out: Path, completed: int, total: int):
+        self.out, self.completed, self.total = out, completed, total
+        super().__init__(f"{out}: interrupted after {completed:,}/{total:,} trials (kept; rerun to resume)")
+
+
+@dataclass
+class EvalResult:
+    out: Path
+    summary: dict[str, Any]
+    trials_run: int
+    """Trials run in this session (0 when everything was already complete)."""
+    seconds: float
+    frames: int = 0
+    """Frames stepped by this session's trials."""
+    parquet: Path = field(default_factory=Path)
+
+
+def method_label(variant: str, env: dict[str, Any] | None) -> str:
+    """The variant's display name, with the grasp-phase wrist thresholds when they are not the default."""
+    label = METHOD_LABELS.get(variant, variant)
+    wrist = (env or {}).get("wrist") or {}
+    d = WristThresholds()
+    gp, gr = wrist.get("grasp_pos", d.grasp_pos), wrist.get("grasp_rot", d.grasp_rot)
+    if (gp, gr) != (d.grasp_pos, d.grasp_rot):
+        label += f" [grasp {100 * gp:g} cm / {gr:g} rad]"
+    return label
+
+
+def find_split(scene: str, name: str | None = None) -> Split | None:
+    """The split ``name`` (the scene must belong to it), else the first split in ``eval/splits`` that lists it."""
+    if name:
+        split = load_split(name)
+        if scene not in split.ids:
+            raise InputError(split.path, "scenes", f"scene {scene!r} is not in split {split.name!r}")
+        return split
+    for n in available("splits"):
+        s = load_split(n)
+        if scene in s.ids:
+            return s
+    return None
+
+
+def _settings_dict(protocol: Protocol, policy: EvalPolicy, trials: TrialSettings, env: dict[str, Any]) -> dict:
+    m = policy.metadata
+    return {
+        "format": EVAL_FORMAT,
+        "version": EVAL_VERSION,
+        "protocol": protocol.name,
+        "scene": m["scene"],
+        "variant": m.get("variant", ""),
+        "checkpoint_sha256": m.get("checkpoint_sha256", ""),
+        "dataset_sha256": m.get("dataset_sha256", ""),
+        "ref_frames": m.get("ref_frames"),
+        "base_seed": trials.base_seed,
+        "noise": trials.noise,
+        "max_object_position_error_m": trials.max_obj_pos_err_m,
+        "min_contact_ratio": trials.min_contact_ratio,
+        "early_termination": protocol.early_termination,
+        "initial_state_noise": protocol.to_dict()["initial_state_noise"],
+        "env": env,
+    }
+
+
+_PART = re.compile(r"^trials-(\d{8})-(\d{8})\.parquet$")
+
+
+def completed_parts(folder: Path) -> list[tuple[int, int, Path]]:
+    """The contiguous chain of part files from trial 0: [(start, stop, path)]."""
+    parts: dict[int, tuple[int, Path]] = {}
+    for p in folder.glob("trials-*.parquet") if folder.is_dir() else []:
+        m = _PART.match(p.name)
+        if m:
+            a, b = int(m.group(1)), int(m.group(2))
+            if b > a and b > parts.get(a, (0, p))[0]:
+                parts[a] = (b, p)
+    chain, at = [], 0
+    while at in parts:
+        b, p = parts[at]
+        chain.append((at, b, p))
+        at = b
+    return chain
+
+
+def _frame(records: list[Records], scene: str, noise: str) -> pd.DataFrame:
+    cols = {k: np.concatenate([r[k] for r in records]) for k in records[0]}
+    n = len(cols["trial"])
+    df = pd.DataFrame({"scene": [scene] * n, "noise": [noise] * n, **cols})
+    df = df[list(TRIAL_COLUMNS)].astype(TRIAL_COLUMNS)
+    return df.sort_values("trial", kind="stable").reset_index(drop=True)
+
+
+class _ChunkWriter:
+    """Buffers completed trials and writes each contiguous block of ``chunk`` trials as one part file."""
+
+    def __init__(self, folder: Path, scene: str, noise: str, start: int, stop: int, chunk: int):
+        self.folder, self.scene, self.noise = folder, scene, noise
+        self.flushed, self.stop, self.chunk = start, stop, chunk
+        self.pending: dict[int, Records] = {}
+        self.on_advance: Callable[[int], None] = lambda n: None
+
+    def __call__(self, rec: Records) -> None:
+        for i, t in enumerate(rec["trial"].tolist()):
+            self.pending[t] = {k: v[i : i + 1] for k, v in rec.items()}
+        self.on_advance(len(rec["trial"]))
+        while self.stop - self.flushed >= 1:
+            end = min(self.flushed + self.chunk, self.stop)
+            if not all(t in self.pending for t in range(self.flushed, end)):
+                break
+            self.flush(end)
+
+    def flush(self, end: int | None = None) -> None:
+        """Write trials ``flushed .. end - 1`` (default: the longest contiguous completed run)."""
+        if end is None:
+            end = self.flushed
+            while end in self.pending:
+                end += 1
+        if end <= self.flushed:
+            return
+        df = _frame([self.pending.pop(t) for t in range(self.flushed, end)], self.scene, self.noise)
+        path = self.folder / f"trials-{self.flushed:08d}-{end:08d}.parquet"
+        with atomic_output(path, suffix=".parquet") as tmp:
+            df.to_parquet(tmp, index=False)
+        self.flushed = end
+
+
+def summarize(df: pd.DataFrame, info: dict[str, Any]) -> dict[str, Any]:
+    """One summary row (see :data:`SUMMARY_COLUMNS`) of a scene's trial table; ``info`` gives the labels."""
+    n, s = len(df), int(df["success"].sum())
+    lo, hi = wilson_interval(s, n)
+    row: dict[str, Any] = {k: info.get(k, "") for k in ("scene", "dataset", "dataset_label", "split", "method")}
+    row |= {"variant": info.get("variant", ""), "protocol": info.get("protocol", ""), "noise": info.get("noise", "")}
+    row |= {"trials": n, "successes": s, "success_rate": s / n if n else math.nan}
+    row |= {"success_ci_low": lo, "success_ci_high": hi}
+    for c in ("obj_pos_err_cm", "obj_rot_err_deg", "wrist_pos_err_cm", "wrist_rot_err_deg", "contact_ratio"):
+        row[c] = float(df[c].mean()) if n else math.nan
+    row["completion_rate"] = float((~df["terminated"]).mean()) if n else math.nan
+    row["frames_completed_mean"] = float(df["frames_completed"].mean()) if n else math.nan
+    row["frames_total"] = int(df["frames_total"].iloc[0]) if n else 0
+    counts = df["termination_reason"].value_counts()
+    for name in TERMINATION_NAMES:
+        row[f"terminated_{name}"] = int(counts.get(name, 0))
+    return row
+
+
+def write_summary(out: Path, row: dict[str, Any], settings: dict[str, Any], policy_meta: dict[str, Any]) -> None:
+    """``summary.json`` (settings, policy, the row) and ``summary.csv`` (the row), both deterministic."""
+    keep = (
+        "scene",
+        "variant",
+        "dataset",
+        "dataset_sha256",
+        "run_dir",
+        "checkpoint_sha256",
+        "iteration",
+        "train_frames",
+        "train_seed",
+    )
+    doc = {
+        "format": EVAL_FORMAT,
+        "version": EVAL_VERSION,
+        "settings": settings,
+        "policy": {k: policy_meta[k] for k in keep if k in policy_meta},
+        "scenes": [row],
+    }
+    with atomic_output(out / "summary.json") as tmp:
+        tmp.write_text(json.dumps(doc, indent=2, sort_keys=True, allow_nan=True) + "\n")
+    frame = pd.DataFrame([row])[SUMMARY_COLUMNS]
+    with atomic_output(out / "summary.csv") as tmp:
+        frame.to_csv(tmp, index=False, float_format="%.6f", lineterminator="\n")
+
+
+def _check_dataset(meta: dict[str, Any], dataset: Path) -> str:
+    if not dataset.is_file():
+        raise InputError(
+            dataset, None, "dataset of the run not found", "the file in the run's config.json (or --dataset)"
+        )
+    sha = meta.get("dataset_sha256")
+    if sha and sha256_file(dataset) != sha:
+        raise InputError(dataset, None, "differs from the run's dataset (sha256)", "the file the policy was trained on")
+    from wristmimic.format.reader import open_dataset
+
+    with open_dataset(dataset) as ds:
+        ds.sequence(meta["scene"])  # one-line error naming the known ids
+        return str(ds.attrs.get("source_dataset", ""))
+
+
+def evaluate_policy(
+    policy: EvalPolicy,
+    protocol: Protocol,
+    out: Path,
+    *,
+    trials: int | None = None,
+    noise: str | None = None,
+    seed: int | None = None,
+    num_envs: int = 256,
+    nthread: int | None = None,
+    dataset: Path | None = None,
+    split: str | None = None,
+    chunk: int = 256,
+    progress: bool = True,
+) -> EvalResult:
+    """Run (or resume) ``protocol`` for ``policy`` into ``out``; raises :class:`EvalInterrupted` on Ctrl-C."""
+    meta = policy.metadata
+    n_trials = protocol.trials if trials is None else int(trials)
+    if n_trials < 1 or num_envs < 1 or chunk < 1:
+        raise InputError(None, "--trials/--num-envs", "must be >= 1")
+    if noise is not None and noise not in NOISE_MODES:
+        raise InputError(None, "--noise", f"{noise!r}", f"one of {', '.join(NOISE_MODES)}")
+    if seed is not None and not 0 <= seed < 2**63:
+        raise InputError(None, "--seed", f"{seed}", "an integer in [0, 2^63)")
+    settings = replace(
+        TrialSettings.from_protocol(protocol),
+        base_seed=protocol.base_seed if seed is None else int(seed),
+        noise=noise or protocol.noise,
+    )
+    ds_path = Path(dataset or meta["dataset"])
+    source = _check_dataset(meta, ds_path)
+    sp = find_split(meta["scene"], split)
+    env_dict = _env_dict(meta.get("env"))
+    expected = _settings_dict(protocol, policy, settings, env_dict)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = out / "eval.json"
+    if manifest.is_file():
+        old = json.loads(manifest.read_text())
+        diff = sorted(k for k in set(old) | set(expected) if old.get(k) != expected.get(k))
+        if diff:
+            raise InputError(
+                out,
+                "eval.json",
+                f"holds an evaluation with other settings ({', '.join(diff)})",
+                "another --out, or delete it",
+            )
+    else:
+        with atomic_output(manifest) as tmp:
+            tmp.write_text(json.dumps(expected, indent=2, sort_keys=True) + "\n")
+    scene = meta["scene"]
+    parts_dir = out / "parts" / scene
+    parts_dir.mkdir(parents=True, exist_ok=True)
+    done = completed_parts(parts_dir)
+    start = done[-1][1] if done else 0
+    t0, frames, ran = time.perf_counter(), 0, 0
+    if start < n_trials:
+        writer = _ChunkWriter(parts_dir, scene, settings.noise, start, n_trials, chunk)
+        env = make_env(meta, min(num_envs, n_trials - start), protocol.early_termination, nthread, ds_path)
+        try:
+            with _progress(f"{scene} ({meta.get('variant', '')})", start, n_trials, progress) as advance:
+                writer.on_advance = advance
+                frames = run_trials(env, policy, settings, start, n_trials, writer)
+        except KeyboardInterrupt:
+            writer.flush()
+            raise EvalInterrupted(out, writer.flushed, n_trials) from None
+        finally:
+            env.close()
+        ran = n_trials - start
+        done = completed_parts(parts_dir)
+    seconds = time.perf_counter() - t0
+    df = pd.concat([pd.read_parquet(p) for _, _, p in done], ignore_index=True)
+    df = df[df["trial"] < n_trials].sort_values("trial", kind="stable").reset_index(drop=True)
+    df = df[list(TRIAL_COLUMNS)].astype(TRIAL_COLUMNS)
+    parquet = out / f"{scene}.parquet"
+    with atomic_output(parquet, suffix=".parquet") as tmp:
+        df.to_parquet(tmp, index=False)
+    info = {
+        "scene": scene,
+        "dataset": source,
+        "dataset_label": sp.label if sp else DATASET_LABELS.get(source, source),
+        "split": sp.name if sp else "",
+        "method": method_label(meta.get("variant", ""), env_dict),
+        "variant": meta.get("variant", ""),
+        "protocol": protocol.name,
+        "noise": settings.noise,
+    }
+    row = summarize(df, info)
+    write_summary(out, row, expected | {"trials": n_trials}, meta)
+    timing = {
+        "seconds": seconds,
+        "trials_run": ran,
+        "trials_per_s": ran / seconds if ran and seconds else None,
+        "frames": frames,
+    }
+    with atomic_output(out / "timing.json") as tmp:
+        tmp.write_text(json.dumps(timing, indent=2, sort_keys=True) + "\n")
+    return EvalResult(out, row, ran, seconds, frames, parquet)
+
+
+def _env_dict(env: Any) -> dict[str, Any]:
+    if env is None:
+        return {}
+    if isinstance(env, dict):
+        return env
+    from wristmimic.rl.config import to_jsonable
+
+    return to_jsonable(env)
+
+
+def _progress(description: str, start: int, total: int, enabled: bool):  # noqa: ANN202
+    """A rich bar over trials on stderr (a context yielding ``advance(n)``)."""
+    import contextlib
+
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    @contextlib.contextmanager
+    def bar():  # noqa: ANN202
+        if not enabled:
+            yield lambda n: None
+            return
+        cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("trials"),
+                TimeElapsedColumn(), TimeRemainingColumn())  # fmt: skip
+        with Progress(*cols, console=Console(stderr=True)) as p:
+            task = p.add_task(description, total=total, completed=start)
+            yield lambda n: p.update(task, advance=n)
+
+    return bar()

@@ -1,0 +1,194 @@
+"""Rollout trials, batched over worlds: each world runs trials back to back from frame 0.
+
+The environment resets an ended world itself (``reset_frame0_prob = 1``, so at frame 0) and the world takes the
+next trial index; no world waits for the batch. A trial's actions are the policy mean plus
+``sigma * normal(seed, step, index)`` (``actions`` mode) or the mean from a state perturbed by
+``normal(seed, ...)`` (``initial-state`` mode): with row-independent policy batches
+(:func:`wristmimic.evaluate.policy.act_rows`) every trial is a pure function of (policy, scene, its seed), so
+it replays alone and a resumed evaluation reproduces the same table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from wristmimic.env.config import EnvConfig
+from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.evaluate.metrics import TrialSums, is_success
+from wristmimic.evaluate.noise import normal, trial_seeds
+from wristmimic.evaluate.policy import EvalPolicy, act_rows
+from wristmimic.evaluate.protocol import InitialStateNoise, Protocol
+
+Records = dict[str, np.ndarray]
+"""Completed trials as columns (see :data:`wristmimic.evaluate.metrics.TRIAL_COLUMNS`, minus ``scene``)."""
+
+NOISE_STREAM_ACTIONS, NOISE_STREAM_JOINTS, NOISE_STREAM_ROOT = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class TrialSettings:
+    """What defines the trials of one evaluation (a protocol after command-line overrides)."""
+
+    base_seed: int
+    noise: str
+    max_obj_pos_err_m: float
+    min_contact_ratio: float
+    initial_state_noise: InitialStateNoise = InitialStateNoise()
+
+    @classmethod
+    def from_protocol(cls, p: Protocol) -> TrialSettings:
+        return cls(p.base_seed, p.noise, p.max_object_position_error_m, p.min_contact_ratio, p.initial_state_noise)
+
+
+def eval_env_config(env: EnvConfig | dict[str, Any], early_termination: str = "run") -> EnvConfig:
+    """The run's environment config for evaluation: every (auto-)reset at frame 0, no truncation before the end
+    of the sequence; ``early_termination="base"`` turns the wrist resets off."""
+    if isinstance(env, dict):
+        from wristmimic.rl.config import from_jsonable
+
+        env = from_jsonable(EnvConfig, env)
+    cfg = replace(env, reset_frame0_prob=1.0, max_episode_frames=2**31 - 1)
+    return replace(cfg, wrist_resets=False) if early_termination == "base" else cfg
+
+
+def make_env(
+    meta: dict[str, Any],
+    num_worlds: int,
+    early_termination: str = "run",
+    nthread: int | None = None,
+    dataset: str | Path | None = None,
+) -> WristMimicEnv:
+    """The evaluation environment of a policy's scene (``meta``: :attr:`EvalPolicy.metadata`)."""
+    from wristmimic.scene import SceneConfig
+
+    sc = meta.get("scene_config")
+    if isinstance(sc, dict):
+        from wristmimic.rl.config import from_jsonable
+
+        sc = from_jsonable(SceneConfig, sc)
+    return WristMimicEnv.from_file(
+        dataset or meta["dataset"],
+        meta["scene"],
+        num_worlds=num_worlds,
+        config=eval_env_config(meta.get("env") or EnvConfig(), early_termination),
+        scene_config=sc,
+        seed=0,
+        nthread=nthread,
+        max_frames=meta.get("ref_frames"),
+    )
+
+
+def perturb_initial_state(
+    env: WristMimicEnv, ids: torch.Tensor, seeds: torch.Tensor, noise: InitialStateNoise
+) -> torch.Tensor:
+    """Add seeded Gaussian noise to the hinge angles and root position of worlds ``ids`` (just reset); returns
+    the new observation of every world."""
+    rows = ids.numpy()
+    qpos, qvel = env.backend.qpos[rows].copy(), env.backend.qvel[rows].copy()
+    adr = env.scene.hinge_qposadr.reshape(-1)
+    zero = torch.zeros(len(ids), dtype=torch.long)
+    qpos[:, adr] += noise.joint_angle_rad * normal(seeds, zero, len(adr), NOISE_STREAM_JOINTS).double().numpy()
+    qpos[:, 0:3] += noise.root_position_m * normal(seeds, zero, 3, NOISE_STREAM_ROOT).double().numpy()
+    env.backend.set_state(rows, qpos, qvel)
+    return env.observe()
+
+
+def run_trials(
+    env: WristMimicEnv,
+    policy: EvalPolicy,
+    settings: TrialSettings,
+    start: int,
+    stop: int,
+    sink: Callable[[Records], None],
+    threads: int | None = None,
+) -> int:
+    """Run trials ``start .. stop - 1`` on ``env``'s worlds; ``sink`` gets each step's completed trials.
+
+    The policy and noise run with ``threads`` torch threads (default: the environment's ``math_threads``, 1):
+    more OpenMP threads contend with the physics threads on a small machine (measured on 2 cores: the policy
+    step took 10x longer with 2 torch threads). Returns the frames stepped by trials (their completed frames).
+    """
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads or env.cfg.math_threads)
+    try:
+        return _run(env, policy, settings, start, stop, sink)
+    finally:
+        torch.set_num_threads(before)
+
+
+def _run(
+    env: WristMimicEnv,
+    policy: EvalPolicy,
+    settings: TrialSettings,
+    start: int,
+    stop: int,
+    sink: Callable[[Records], None],
+) -> int:
+    N, T = env.num_worlds, env.ref.num_frames
+    ref_contact = int(env.ref.hand[1:T].sum())
+    sigma = policy.sigma.to(torch.float32)
+    world_trial = torch.full((N,), -1, dtype=torch.long)
+    take = min(N, stop - start)
+    world_trial[:take] = torch.arange(start, start + take)
+    nxt = start + take
+    seeds = trial_seeds(settings.base_seed, world_trial.clamp_min(0))
+    steps = torch.zeros(N, dtype=torch.long)
+    sums = TrialSums.zeros(N)
+    obs, _ = env.reset(start_frames=torch.zeros(N, dtype=torch.long))
+    sampled = settings.noise == "actions"
+    if not sampled:
+        obs = perturb_initial_state(env, torch.arange(take), seeds[:take], settings.initial_state_noise)
+    frames = 0
+    while bool((world_trial >= 0).any()):
+        actions = act_rows(policy, obs)
+        if sampled:
+            actions = actions + sigma * normal(seeds, steps, env.action_size, NOISE_STREAM_ACTIONS)
+        obs, _, terminated, truncated, info = env.step(actions)
+        sums.add(info["eval"])
+        steps += 1
+        done = (terminated | truncated) & (world_trial >= 0)
+        if not bool(done.any()):
+            continue
+        ids = torch.nonzero(done).flatten()
+        m = sums.means(ids, ref_contact)
+        term = terminated[ids]
+        success = is_success(
+            term,
+            truncated[ids],
+            m["obj_pos_err_cm"] / 100.0,
+            m["contact_ratio"],
+            settings.max_obj_pos_err_m,
+            settings.min_contact_ratio,
+        )
+        reasons = info["termination_reason"][ids].tolist()
+        n_frames = sums.frames[ids]
+        frames += int(n_frames.sum())
+        sink(
+            {
+                "trial": world_trial[ids].numpy().copy(),
+                "seed": seeds[ids].numpy().copy(),
+                "success": success.numpy(),
+                "terminated": term.numpy(),
+                "termination_reason": np.array([WristMimicEnv.reason_name(r) for r in reasons], dtype=object),
+                "frames_completed": n_frames.numpy().copy(),
+                "frames_total": np.full(len(ids), T - 1, dtype=np.int64),
+                **{k: v.numpy() for k, v in m.items()},
+            }
+        )
+        k = min(len(ids), stop - nxt)
+        world_trial[ids[k:]] = -1
+        new = ids[:k]
+        world_trial[new] = torch.arange(nxt, nxt + k)
+        nxt += k
+        seeds[new] = trial_seeds(settings.base_seed, world_trial[new])
+        steps[ids] = 0
+        sums.clear(ids)
+        if k and not sampled:
+            obs = perturb_initial_state(env, new, seeds[new], settings.initial_state_noise)
+    return frames
