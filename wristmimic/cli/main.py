@@ -5,7 +5,11 @@ from __future__ import annotations
 import typer
 
 from wristmimic import __version__
-from wristmimic.cli import convert, humanoid, inspect, scene, validate
+from wristmimic.cli import convert, humanoid, inspect, pipeline, scene, train, validate
+from wristmimic.cli import evaluate as evaluate_cli
+from wristmimic.cli import report as report_cli
+from wristmimic.cli import synth as synth_cli
+from wristmimic.cli import view as view_cli
 
 app = typer.Typer(
     name="wristmimic",
@@ -20,6 +24,12 @@ app.add_typer(humanoid.app, name="humanoid")
 app.command("inspect")(inspect.inspect_cmd)
 app.command("validate")(validate.validate_cmd)
 app.command("scene")(scene.scene_cmd)
+app.command("train")(train.train_cmd)
+app.command("evaluate")(evaluate_cli.evaluate_cmd)
+app.command("report")(report_cli.report_cmd)
+app.command("run")(pipeline.run_cmd)
+app.command("synth")(synth_cli.synth_cmd)
+app.command("view")(view_cli.view_cmd)
 
 
 def _version(value: bool) -> None:
