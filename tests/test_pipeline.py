@@ -1,5 +1,5 @@
 """Pipelines: a tiny synthetic convert -> train pipeline runs once, then a second run does no work; a changed
-parameter re-runs only what depends on it; stages not implemented yet are reported, not skipped silently."""
+parameter re-runs only what depends on it; evaluate and report follow the trained runs."""
 
 from __future__ import annotations
 
@@ -76,14 +76,20 @@ def test_a_changed_output_is_redone(tmp_path: Path) -> None:
     assert [s for u, s in again.items() if u.startswith("convert")] == ["ran"]
 
 
-def test_unimplemented_stages_are_reported_by_the_command(tmp_path: Path) -> None:
-    spec = _write_spec(tmp_path, extra="[evaluate]\n[report]\n")
+def test_full_pipeline_with_evaluate_and_report_by_the_command(tmp_path: Path) -> None:
+    """convert -> train -> evaluate -> report through `wristmimic run`; a second run does no work."""
+    spec = _write_spec(
+        tmp_path,
+        extra=f'[evaluate]\nprotocol = "quick"\ntrials = 4\nnum_envs = 2\n[report]\noutput = "{tmp_path / "report"}"\n',
+    )
     r = CliRunner().invoke(app, ["run", str(spec), "-q", "--nthread", "1"])
     assert r.exit_code == 0, r.output
-    assert "evaluate: not available yet" in r.output and "report: not available yet" in r.output
-    assert "2 ran, 0 up to date, not available yet: evaluate, report" in r.output
+    assert "4 ran, 0 up to date" in r.output
+    assert (tmp_path / "report" / "summary.md").is_file()
+    evals = list((tmp_path / "work" / "runs").glob("*/eval/quick"))
+    assert len(evals) == 1 and any(evals[0].iterdir())
     r = CliRunner().invoke(app, ["run", str(spec), "-q", "--nthread", "1"])
-    assert "0 ran, 2 up to date" in r.output
+    assert "0 ran, 4 up to date" in r.output, r.output
 
 
 def test_bad_pipeline_files_fail_with_one_line(tmp_path: Path) -> None:

@@ -3,8 +3,7 @@
 Each stage is registered in :data:`STAGES` by name; a stage does its work in units (one converted file, one
 trained scene) through :meth:`Context.cached`, which skips a unit whose input fingerprint (content hashes of its
 input files, its parameters, the code version) and output hashes match the last run. The record lives in
-``<work_dir>/pipeline_state.json``. Stages without an implementation yet are registered with ``run=None`` and
-reported as "not available yet".
+``<work_dir>/pipeline_state.json``.
 
 A pipeline file (paths relative to the current folder)::
 
@@ -21,6 +20,9 @@ A pipeline file (paths relative to the current folder)::
     seed = 0
     [train.ppo]                          # optional overrides of the preset
     max_frames = 5_000_000
+    [evaluate]
+    protocol = "paper"                   # eval/protocols/<name>.toml; trials = ... overrides
+    [report]                             # output = "reports/omomo" (default <work_dir>/report)
 """
 
 from __future__ import annotations
@@ -184,8 +186,53 @@ def train_stage(ctx: Context, p: dict[str, Any]) -> None:
         ctx.outputs.setdefault("runs", []).append(run_dir)
 
 
-STAGES["evaluate"] = Stage("evaluate", None, note="evaluation (success rate, object errors) is a later issue")
-STAGES["report"] = Stage("report", None, note="tables and plots are a later issue")
+@register("evaluate", {"protocol", "trials", "noise", "seed", "num_envs"})
+def evaluate_stage(ctx: Context, p: dict[str, Any]) -> None:
+    """Evaluate every trained run (``outputs["runs"]``) under a protocol into ``<run>/eval/<protocol>``."""
+    from wristmimic.evaluate.policy import load_eval_policy
+    from wristmimic.evaluate.protocol import load_protocol
+    from wristmimic.evaluate.runner import evaluate_policy
+
+    protocol = load_protocol(p.get("protocol", "paper"))
+    runs = ctx.outputs.get("runs") or []
+    if not runs:
+        raise InputError(ctx.spec_path, "[evaluate]", "no trained run to evaluate", "a [train] stage before it")
+    for run_dir in runs:
+        out = Path(run_dir) / "eval" / protocol.name
+        inputs = {
+            "checkpoint": _hash_path(Path(run_dir) / "checkpoint.pt"),
+            "params": p,
+            "code": wristmimic.__version__,
+        }
+
+        def work(run_dir: Path = Path(run_dir), out: Path = out) -> None:
+            evaluate_policy(
+                load_eval_policy(run_dir),
+                protocol,
+                out,
+                trials=p.get("trials"),
+                noise=p.get("noise"),
+                seed=p.get("seed"),
+                num_envs=int(p.get("num_envs", 256)),
+                nthread=ctx.nthread,
+                progress=ctx.progress,
+            )
+
+        ctx.cached(f"evaluate {Path(run_dir).name}", inputs, [out], work)
+        ctx.outputs.setdefault("evals", []).append(out)
+
+
+@register("report", {"output", "title", "splits"})
+def report_stage(ctx: Context, p: dict[str, Any]) -> None:
+    """Tables, plots and summary.md of every evaluation of this pipeline (``output``, default ``<work_dir>/report``)."""
+    from wristmimic.report.summary import build_report
+
+    evals = ctx.outputs.get("evals") or []
+    if not evals:
+        raise InputError(ctx.spec_path, "[report]", "no evaluation to report", "an [evaluate] stage before it")
+    out = Path(p.get("output", ctx.work_dir / "report"))
+    inputs = {"evals": {str(e): _hash_path(e) for e in evals}, "params": p, "code": wristmimic.__version__}
+    ctx.cached("report", inputs, [out], lambda: build_report(list(evals), out, p.get("title"), p.get("splits")))
 
 
 # ---------------------------------------------------------------------------------------------- running
