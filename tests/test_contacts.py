@@ -213,6 +213,25 @@ def test_buried_body_counts_as_contact_in_a_closed_mesh():
     assert d_open[1, 0] == pytest.approx(0.09, abs=3e-3)
 
 
+def test_inside_test_is_not_fooled_by_a_sample_on_the_next_face():
+    """Near an edge the single nearest surface sample can lie on the adjacent face, whose normal calls a point
+    outside the object 'inside'. Crafted samples: a point 9.6 cm in front of the front face (x = 0.3), 2.5 mm
+    below the top (z = 0.45), whose nearest sample is on the top face; it is outside, the front-face samples
+    and the bounding box say so."""
+    from scipy.spatial import cKDTree
+
+    top = np.array([[0.295, y, 0.45] for y in (-0.01, 0.0, 0.01)])
+    front = np.array([[0.3, y, z] for y in (-0.01, 0.0, 0.01) for z in (0.40, 0.38)])
+    pts = np.vstack([top, front])
+    normals = np.vstack([np.tile([0, 0, 1.0], (len(top), 1)), np.tile([1.0, 0, 0], (len(front), 1))])
+    tree = cKDTree(pts)
+    ot = C._ObjectTree(tree, tree, 0.0, normals, np.array([-0.3, -0.5, -0.45]), np.array([0.3, 0.5, 0.45]))
+    p = np.array([[0.396, 0.0, 0.4475], [0.0, 0.0, 0.2]])  # outside near the edge; truly inside
+    assert tree.query(p[0])[1] < len(top)  # the nearest sample is on the top face
+    inside = C._inside(ot, p, np.array([0.096, 0.2]), np.zeros(2, dtype=np.int64), np.array([False, False]))
+    assert inside.tolist() == [False, True]
+
+
 def test_foot_rule(model):
     root_z = np.array([ROOT_Z, ROOT_Z + 0.5])  # frame 1: foot 58 cm above the floor
     q = _qpos(model, 2, root_z)

@@ -340,19 +340,24 @@ def _nearest(ot: _ObjectTree, p: np.ndarray, key: np.ndarray, flat: np.ndarray, 
 
 
 def _inside(ot: _ObjectTree, p: np.ndarray, d: np.ndarray, nn: np.ndarray, far: np.ndarray) -> np.ndarray:
-    """(N,) bool: points ``p`` behind the outward normal of their nearest sample (closed meshes only).
+    """(N,) bool: points ``p`` inside a closed mesh (distance 0).
 
-    ``d``/``nn`` are the looked-up distances / nearest indices (inf where not looked up). Points ``far``
-    from every object point (beyond the query bound) but within the object's bounding box are looked up
-    again without a bound, so that a body buried deep inside the object is found too.
+    A point counts as inside when it lies within the object's bounding box and behind the outward normals of
+    the majority of its 5 nearest surface samples. The bounding box and the vote matter near edges, where
+    the single nearest sample can sit on the next face over and point the wrong way. ``d`` (looked-up
+    distances, inf where not looked up) and ``far`` (beyond the query bound) choose which points to test:
+    near ones, and far ones inside the bounding box (a body buried deep inside the object).
     """
-    nn = nn.copy()
-    deep = far & np.all((p >= ot.lo) & (p <= ot.hi), axis=1)
-    if deep.any():
-        nn[deep] = ot.tree.query(p[deep], k=1, workers=-1)[1]
-    ok = np.isfinite(d) | deep
+    in_box = np.all((p >= ot.lo) & (p <= ot.hi), axis=1)
+    cand = in_box & (np.isfinite(d) | far)
     out = np.zeros(len(p), dtype=bool)
-    out[ok] = np.einsum("ni,ni->n", p[ok] - ot.tree.data[nn[ok]], ot.normals[nn[ok]]) < 0.0
+    if not cand.any():
+        return out
+    k = min(5, len(ot.tree.data))
+    _, idx = ot.tree.query(p[cand], k=k, workers=-1)
+    idx = idx.reshape(len(idx), k)
+    behind = np.einsum("nki,nki->nk", p[cand][:, None] - ot.tree.data[idx], ot.normals[idx]) < 0.0
+    out[cand] = behind.sum(axis=1) * 2 > k
     return out
 
 
