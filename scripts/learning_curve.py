@@ -16,7 +16,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
+from matplotlib.ticker import EngFormatter  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from wristmimic.safe_io import atomic_output  # noqa: E402
@@ -40,6 +41,7 @@ def plot(run_dir: Path, out: Path, smooth: int) -> Path:
         ax.plot(m["frames"], y, alpha=0.3, lw=0.8)
         ax.plot(m["frames"], y.rolling(smooth, min_periods=1).mean(), lw=2)
         ax.set_xlabel("environment frames")
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))  # 200k, 1M: no overlapping tick labels
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     fig.suptitle(title)
