@@ -120,3 +120,15 @@ def test_unwritable_output_folder_is_reported(tmp_path: Path) -> None:
         DatasetWriter(
             Path("/proc/o.h5"), source_dataset="x", source_format="y", converter="z", input_sha256={}
         ).__enter__()
+
+
+def test_written_files_get_the_usual_permissions(tmp_path: Path) -> None:
+    import os
+
+    from wristmimic.safe_io import atomic_output
+
+    with atomic_output(tmp_path / "out.txt") as tmp:
+        tmp.write_text("x")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (tmp_path / "out.txt").stat().st_mode & 0o777 == 0o666 & ~umask
