@@ -151,6 +151,57 @@ def write_objects(
     return assets
 
 
+def box_record(
+    name: str,
+    size: Sequence[float],
+    density: float,
+    *,
+    static: bool,
+    inferred: bool,
+    n_surface: int,
+    surface_seed: int,
+    source_file: str,
+    extra: dict[str, Any] | None = None,
+) -> ObjectRecord:
+    """A solid box centred at its frame's origin (full ``size`` in m): mesh, one hull (the box itself),
+    analytic mass and inertia, seeded surface samples. Used for inferred supports and synthetic scenes."""
+    import hashlib
+
+    import trimesh
+
+    mesh = trimesh.creation.box(extents=np.asarray(size, float))
+    v = np.asarray(mesh.vertices, np.float64)
+    f = np.asarray(mesh.faces, np.int32)
+    dx, dy, dz = (float(x) for x in size)
+    mass = dx * dy * dz * float(density)
+    inertia = np.diag([dy**2 + dz**2, dx**2 + dz**2, dx**2 + dy**2]) * mass / 12.0
+    rng = np.random.default_rng(surface_seed)
+    pts = trimesh.sample.sample_surface(mesh, n_surface, seed=int(rng.integers(2**31)))[0]
+    return ObjectRecord(
+        name=name,
+        static=static,
+        inferred=inferred,
+        vertices=v,
+        faces=f,
+        hull_vertices=v,
+        hull_faces=f,
+        hull_vertex_offsets=np.array([0, len(v)]),
+        hull_face_offsets=np.array([0, len(f)]),
+        hull_meta={"method": "box", "params": {}, "seed": 0},
+        mass=mass,
+        com=np.zeros(3),
+        inertia=inertia,
+        mass_method="box",
+        density=float(density),
+        watertight=True,
+        surface_points=np.asarray(pts, np.float32),
+        surface_seed=surface_seed,
+        mesh_sha256=hashlib.sha256(v.astype(np.float32).tobytes() + f.tobytes()).hexdigest(),
+        source_file=source_file,
+        extra={"size_m": [dx, dy, dz], **(extra or {})},
+    )
+
+
 @dataclass
 class Kinematics:
     """Per-frame kinematics of a converted sequence."""

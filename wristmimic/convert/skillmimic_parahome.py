@@ -27,6 +27,7 @@ import numpy as np
 from wristmimic.convert.common import (
     ConvertOptions,
     ConvertReport,
+    box_record,
     contact_summary,
     geometric_contact_meta,
     geometric_contacts,
@@ -208,45 +209,25 @@ def read_clip(path: Path, num_objects: int) -> np.ndarray:
 def _support_record(
     sup: InferredSupport, sid: str, k: int, opts: ConvertOptions, params: SupportParams
 ) -> ObjectRecord:
-    v, f = sup.box_mesh()
     he = np.asarray(sup.half_extents, float)
-    mass = float(8 * np.prod(he) * opts.object_density)
-    inertia = np.diag([he[1] ** 2 + he[2] ** 2, he[0] ** 2 + he[2] ** 2, he[0] ** 2 + he[1] ** 2]) * mass / 3.0
-    rng = np.random.default_rng(opts.surface_seed)
-    import trimesh
-
-    pts = trimesh.sample.sample_surface(
-        trimesh.Trimesh(v, f, process=False), opts.surface_points, seed=int(rng.integers(2**31))
-    )[0]
-    return ObjectRecord(
-        name=f"support{k}",
+    extra = {
+        "sequence": sid,
+        "intervals": [list(map(int, i)) for i in sup.intervals],
+        "top_z": float(sup.top_z),
+        "center": np.asarray(sup.center).tolist(),
+        "half_extents": he.tolist(),
+        "support_params": params.to_dict(),
+    }
+    return box_record(
+        f"support{k}",
+        2 * he,
+        opts.object_density,
         static=True,
         inferred=True,
-        vertices=v,
-        faces=f,
-        hull_vertices=v,
-        hull_faces=f,
-        hull_vertex_offsets=np.array([0, len(v)]),
-        hull_face_offsets=np.array([0, len(f)]),
-        hull_meta={"method": "box", "params": {}, "seed": 0},
-        mass=mass,
-        com=np.zeros(3),
-        inertia=inertia,
-        mass_method="box",
-        density=opts.object_density,
-        watertight=True,
-        surface_points=pts.astype(np.float32),
+        n_surface=opts.surface_points,
         surface_seed=opts.surface_seed,
-        mesh_sha256="",
         source_file=f"inferred from {sid}",
-        extra={
-            "sequence": sid,
-            "intervals": [list(map(int, i)) for i in sup.intervals],
-            "top_z": float(sup.top_z),
-            "center": np.asarray(sup.center).tolist(),
-            "half_extents": he.tolist(),
-            "support_params": params.to_dict(),
-        },
+        extra=extra,
     )
 
 

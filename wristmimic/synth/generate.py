@@ -12,7 +12,6 @@ variant's :class:`~wristmimic.synth.motion.MotionSpec` and the seed, and all of 
 
 from __future__ import annotations
 
-import hashlib
 import zlib
 from dataclasses import replace
 from pathlib import Path
@@ -21,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from wristmimic.convert import contacts as C
-from wristmimic.convert.common import contact_summary, geometric_contacts, humanoid_record
+from wristmimic.convert.common import box_record, contact_summary, geometric_contacts, humanoid_record
 from wristmimic.errors import InputError
 from wristmimic.format.records import HumanoidRecord, ObjectRecord, SequenceRecord
 from wristmimic.format.writer import DatasetWriter
@@ -78,39 +77,16 @@ def box_object(
     name: str, size: tuple[float, float, float], density: float, *, static: bool, extra: dict | None = None
 ) -> ObjectRecord:
     """A solid box centred at its frame's origin: mesh, one hull (itself), mass, inertia, surface samples."""
-    import trimesh
-
-    mesh = trimesh.creation.box(extents=np.asarray(size, float))
-    v = np.asarray(mesh.vertices, np.float64)
-    f = np.asarray(mesh.faces, np.int32)
-    dx, dy, dz = size
-    mass = float(dx * dy * dz * density)
-    inertia = np.diag([dy**2 + dz**2, dx**2 + dz**2, dx**2 + dy**2]) * mass / 12.0
-    rng = np.random.default_rng(SURFACE_SEED)
-    pts = trimesh.sample.sample_surface(mesh, SURFACE_POINTS, seed=int(rng.integers(2**31)))[0]
-    digest = hashlib.sha256(v.astype(np.float32).tobytes() + f.tobytes()).hexdigest()
-    return ObjectRecord(
-        name=name,
+    return box_record(
+        name,
+        size,
+        density,
         static=static,
         inferred=False,
-        vertices=v,
-        faces=f,
-        hull_vertices=v,
-        hull_faces=f,
-        hull_vertex_offsets=np.array([0, len(v)]),
-        hull_face_offsets=np.array([0, len(f)]),
-        hull_meta={"method": "box", "params": {}, "seed": 0},
-        mass=mass,
-        com=np.zeros(3),
-        inertia=inertia,
-        mass_method="box",
-        density=float(density),
-        watertight=True,
-        surface_points=np.asarray(pts, np.float32),
+        n_surface=SURFACE_POINTS,
         surface_seed=SURFACE_SEED,
-        mesh_sha256=digest,
         source_file="wristmimic-synth",
-        extra={"size_m": list(map(float, size)), **(extra or {})},
+        extra=extra,
     )
 
 
