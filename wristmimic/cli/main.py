@@ -5,7 +5,7 @@ from __future__ import annotations
 import typer
 
 from wristmimic import __version__
-from wristmimic.cli import convert, humanoid, inspect, pipeline, scene, train, validate
+from wristmimic.cli import convert, demo, humanoid, inspect, pipeline, scene, train, validate
 from wristmimic.cli import evaluate as evaluate_cli
 from wristmimic.cli import report as report_cli
 from wristmimic.cli import synth as synth_cli
@@ -30,6 +30,7 @@ app.command("report")(report_cli.report_cmd)
 app.command("run")(pipeline.run_cmd)
 app.command("synth")(synth_cli.synth_cmd)
 app.command("view")(view_cli.view_cmd)
+app.command("demo")(demo.demo_cmd)
 
 
 def _version(value: bool) -> None:
