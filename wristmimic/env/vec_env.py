@@ -282,8 +282,10 @@ class WristMimicEnv:
         self.steps += 1
         s = self.sim_state()
         rf = self.ref_frame(self.frame)
-        reward, terms = self._reward(s, rf)
-        terminated, reason = self._terminations(s, rf)
+        hand = self._sim_hand(s)  # shared by reward, terminations and the evaluation errors
+        _, phase = self._window()
+        reward, terms = self._reward(s, rf, hand, phase)
+        terminated, reason = self._terminations(s, rf, hand, phase)
         T = self.ref.num_frames
         truncated = ((self.frame >= T - 1) | (self.steps >= self.cfg.max_episode_frames)) & ~terminated
         done = terminated | truncated
@@ -294,7 +296,7 @@ class WristMimicEnv:
             "episode_frames": self.steps.clone(),
             "episode_start": self.start.clone(),
             "frame": self.frame.clone(),
-            "eval": self._eval_errors(s, rf),
+            "eval": self._eval_errors(s, rf, hand),
         }
         self._prev_joint_vel = s.joint_vel
         self._prev_obj_vel = torch.cat([s.obj_linvel, s.obj_angvel], -1)
@@ -304,18 +306,21 @@ class WristMimicEnv:
             s = None
         return self._observe(s), reward, terminated, truncated, info
 
-    def _eval_errors(self, s: SimState, rf: RefFrame) -> dict[str, torch.Tensor]:
+    def _sim_hand(self, s: SimState) -> torch.Tensor:
+        """(N, 2) bool: any body of the left / right hand touches a dynamic object."""
+        return torch.stack([s.contact_obj[:, h].any(1) for h in self.hands], 1)
+
+    def _eval_errors(self, s: SimState, rf: RefFrame, hand: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-world tracking errors of this step, from the state before any auto-reset (for evaluation):
         ``obj_pos`` (m) and ``obj_rot`` (rad) mean over dynamic objects, ``wrist_pos`` (m) and ``wrist_rot``
         (rad) mean over both wrists, all (N,); ``sim_hand`` and ``ref_hand`` (N, 2) bool hand-object contact."""
         w = self.sets.wrists
-        hands = [s.contact_obj[:, h].any(1) for h in self.hands]
         return {
             "obj_pos": torch.linalg.vector_norm(s.obj_pos - rf.obj_pos, dim=-1).mean(-1),
             "obj_rot": quat_angle(rf.obj_quat, s.obj_quat).mean(-1),
             "wrist_pos": torch.linalg.vector_norm(s.body_pos[:, w] - rf.body_pos[:, w], dim=-1).mean(-1),
             "wrist_rot": quat_angle(rf.body_quat[:, w], s.body_quat[:, w]).mean(-1),
-            "sim_hand": torch.stack(hands, 1),
+            "sim_hand": hand,
             "ref_hand": rf.hand,
         }
 
@@ -324,10 +329,11 @@ class WristMimicEnv:
         ph = W.phase(self.frame, t_c, self.cfg.window)
         return ph != W.OUTSIDE, ph
 
-    def _reward(self, s: SimState, rf: RefFrame) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        in_window, _ = self._window()
+    def _reward(
+        self, s: SimState, rf: RefFrame, sim_hand: torch.Tensor, phase: torch.Tensor
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        in_window = phase != W.OUTSIDE
         f = self.frame.clamp(0, self.ref.num_frames - 1)
-        sim_hand = torch.stack([s.contact_obj[:, self.hands[0]].any(1), s.contact_obj[:, self.hands[1]].any(1)], 1)
         key = self.sets.key
         x = RewardInputs(
             body_pos=s.body_pos,
@@ -359,9 +365,9 @@ class WristMimicEnv:
         )
         return compute_reward(x, self.sets, self.cfg)
 
-    def _terminations(self, s: SimState, rf: RefFrame) -> tuple[torch.Tensor, torch.Tensor]:
-        _, ph = self._window()
-        sim_hand = torch.stack([s.contact_obj[:, self.hands[0]].any(1), s.contact_obj[:, self.hands[1]].any(1)], 1)
+    def _terminations(
+        self, s: SimState, rf: RefFrame, sim_hand: torch.Tensor, ph: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         lost = self.lost.update(rf.hand, sim_hand)
         w = self.sets.wrists
         x = TerminationInputs(
