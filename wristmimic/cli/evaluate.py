@@ -30,6 +30,10 @@ def evaluate_cmd(
     ),
     seed: int = typer.Option(None, "--seed", min=0, help="Base seed of the trial seeds (default: the protocol's)."),
     dataset: Path = typer.Option(None, "--dataset", help="Canonical file to use instead of the run's (same sha256)."),
+    backend: str = typer.Option(
+        "cpu", "--backend", help="Physics: cpu (MuJoCo threads) or warp (MuJoCo Warp; policy and math on its device)."
+    ),
+    device: str = typer.Option(None, "--device", help="Warp device: cuda, cuda:N or cpu (default: a GPU if any)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Run rollout trials from frame 0 and write <scene>.parquet (one row per trial), summary.json and summary.csv.
@@ -52,7 +56,8 @@ def evaluate_cmd(
         try:
             r = evaluate_policy(
                 policy, proto, target, trials=trials, noise=noise, seed=seed, num_envs=num_envs, nthread=nthread,
-                dataset=dataset, split=split, progress=not quiet,
+                dataset=dataset, split=split, progress=not quiet, backend=backend,
+                backend_options={"device": device} if device else None,
             )  # fmt: skip
         except EvalInterrupted as exc:
             typer.echo(f"interrupted: {exc}", err=True)

@@ -36,6 +36,10 @@ def train_cmd(
     seed: int = typer.Option(0, "--seed", help="Seed of networks, action noise, minibatches and start frames."),
     resume: Path = typer.Option(None, "--resume", help="Continue this run folder exactly where it stopped."),
     nthread: int = typer.Option(None, "--nthread", help="Physics threads (default: all cores)."),
+    backend: str = typer.Option(
+        "cpu", "--backend", help="Physics: cpu (MuJoCo threads) or warp (MuJoCo Warp: GPU worlds, torch on the GPU)."
+    ),
+    device: str = typer.Option(None, "--device", help="Warp device: cuda, cuda:N or cpu (default: a GPU if any)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Train one PPO policy per scene; each run folder gets config.json, metrics.csv and checkpoint.pt.
@@ -51,8 +55,8 @@ def train_cmd(
 
     with user_errors():
         if resume is not None:
-            if scene or scenes or dataset:
-                raise InputError(None, "--resume", "takes dataset, scene and config from the run folder")
+            if scene or scenes or dataset or backend != "cpu" or device:
+                raise InputError(None, "--resume", "takes dataset, scene, backend and config from the run folder")
             r = resume_run(resume, max_frames=max_frames, nthread=nthread, progress=not quiet)
             typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
             return
@@ -62,7 +66,9 @@ def train_cmd(
             raise InputError(dataset, None, "file not found")
         ppo = make_preset(preset, max_frames=max_frames, num_envs=num_envs)
         for sid in _scenes(dataset, scene, scenes):
-            spec = TrainSpec(dataset, sid, variant, seed, preset, ppo, ref_frames=ref_frames)
+            spec = TrainSpec(
+                dataset, sid, variant, seed, preset, ppo, ref_frames=ref_frames, backend=backend, device=device
+            )
             r = start_run(spec, default_run_dir(out, sid, variant, seed), nthread=nthread, progress=not quiet)
             typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
             if r.status == "interrupted":

@@ -7,7 +7,8 @@
 Worlds that end (terminated or truncated) are reset automatically at the end of ``step``; the returned
 observation is then the first observation of the new episode (``info["time_outs"]`` tells PPO where to
 bootstrap). No Python loop runs over worlds or bodies: physics goes through the backend in one call,
-observation/reward math is batched torch.
+observation/reward math is batched torch on the backend's device (the CPU, or the GPU with the ``warp``
+backend), and nothing on the step path waits for the host except on the CPU backend.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from wristmimic.env.terminations import REASONS, ContactLostCounter, Termination
 from wristmimic.env.torch_math import quat_angle, quat_rotate
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
-from wristmimic.sim.backend import CpuRolloutBackend, PhysicsBackend
+from wristmimic.sim.backend import PhysicsBackend, make_backend
 
 
 @dataclass
@@ -82,44 +83,59 @@ class WristMimicEnv:
         num_worlds: int,
         config: EnvConfig | None = None,
         seed: int = 0,
-        backend: PhysicsBackend | None = None,
+        backend: PhysicsBackend | str = "cpu",
         nthread: int | None = None,
+        backend_options: dict | None = None,
     ):
-        self.scene, self.ref, self.cfg = scene, reference, config or EnvConfig()
+        self.scene, self.cfg = scene, config or EnvConfig()
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
-        self.backend = backend or CpuRolloutBackend(scene.model, self.num_worlds, nthread)
-        self.sets = BodySets.from_roles(scene.humanoid.roles)
+        if isinstance(backend, str):
+            backend = make_backend(backend, scene.model, self.num_worlds, nthread, **(backend_options or {}))
+        self.backend = backend
+        dev = self.device = backend.device
+        self.ref = reference.to(dev)
+        self.sets = BodySets.from_roles(scene.humanoid.roles).to(dev)
         self._idx = _sensor_index(scene)
-        self._tidx = {k: torch.as_tensor(v, dtype=torch.long) for k, v in self._idx.__dict__.items()}
-        self._hinge_dof = scene.hinge_dofadr.reshape(-1)
-        self._gen = torch.Generator().manual_seed(self.seed)
+        self._tidx = {k: torch.as_tensor(v, dtype=torch.long, device=dev) for k, v in self._idx.__dict__.items()}
+        self._hinge_dof = torch.as_tensor(scene.hinge_dofadr.reshape(-1), dtype=torch.long, device=dev)
+        self._gen = torch.Generator(device=dev).manual_seed(self.seed)
         N = self.num_worlds
-        self.frame = torch.zeros(N, dtype=torch.long)
-        self.start = torch.zeros(N, dtype=torch.long)
-        self.steps = torch.zeros(N, dtype=torch.long)
-        self.lost = ContactLostCounter(N)
+        self.frame = torch.zeros(N, dtype=torch.long, device=dev)
+        self.start = torch.zeros(N, dtype=torch.long, device=dev)
+        self.steps = torch.zeros(N, dtype=torch.long, device=dev)
+        self.lost = ContactLostCounter(N, dev)
         roles = scene.humanoid.roles
-        fingers = torch.as_tensor(roles["fingers"], dtype=torch.long)
-        key = torch.as_tensor(roles["key_bodies"], dtype=torch.long)
-        non_finger = torch.as_tensor(roles["non_finger"], dtype=torch.long)
+
+        def idx(a: object) -> torch.Tensor:
+            return torch.as_tensor(np.asarray(a), dtype=torch.long, device=dev)
+
+        fingers, key, non_finger = idx(roles["fingers"]), idx(roles["key_bodies"]), idx(roles["non_finger"])
         self.tracked = torch.cat([key, fingers]) if self.cfg.finger_targets else key
         self.rotated = torch.cat([non_finger, fingers]) if self.cfg.finger_targets else non_finger
         self.goal_contact = key
-        self.all_bodies = torch.arange(scene.skeleton.num_bodies)
-        self.hands = (torch.as_tensor(roles["left_hand"]), torch.as_tensor(roles["right_hand"]))
+        self.all_bodies = torch.arange(scene.skeleton.num_bodies, device=dev)
+        self.hands = (idx(roles["left_hand"]), idx(roles["right_hand"]))
         # action -> PD target (InterMimic): mid-range offset and half-range scale; wide joints centred at 0
         lo, hi = scene.ctrl_range[:, 0], scene.ctrl_range[:, 1]
         offset, scale = (lo + hi) / 2, (hi - lo) / 2
         wide = np.abs(offset) > 0.1
         offset[wide], scale[wide] = 0.0, np.pi
-        self._offset = torch.as_tensor(offset, dtype=torch.float32)
-        self._scale = torch.as_tensor(scale * self.cfg.action_scale, dtype=torch.float32)
-        self._lo, self._hi = torch.as_tensor(lo, dtype=torch.float32), torch.as_tensor(hi, dtype=torch.float32)
-        self._ctrl = np.zeros((N, scene.model.nu))
-        self._act_cols = scene.actuator_ids.reshape(-1)
-        self._prev_joint_vel = torch.zeros(N, len(self._act_cols))
-        self._prev_obj_vel = torch.zeros(N, len(scene.dynamic_objects), 6)
+
+        def f32(a: np.ndarray) -> torch.Tensor:
+            return torch.as_tensor(a, dtype=torch.float32, device=dev)
+
+        self._offset, self._scale = f32(offset), f32(scale * self.cfg.action_scale)
+        self._lo, self._hi = f32(lo), f32(hi)
+        self._ctrl = torch.zeros(N, scene.model.nu, device=dev)
+        self._act_cols = idx(scene.actuator_ids.reshape(-1))
+        self._prev_joint_vel = torch.zeros(N, len(self._act_cols), device=dev)
+        self._prev_obj_vel = torch.zeros(N, len(scene.dynamic_objects), 6, device=dev)
+        # reference state -> qpos / qvel columns (free joints of the root and the dynamic objects, hinges)
+        self._qpos0 = torch.as_tensor(scene.model.qpos0, dtype=torch.float64, device=dev)
+        self._hinge_qpos = idx(scene.hinge_qposadr.reshape(-1))
+        self._obj_qpos = idx([o.qposadr for o in scene.dynamic_objects])
+        self._obj_dof = idx([o.dofadr for o in scene.dynamic_objects])
         self.action_size = len(self._act_cols)
         self._obs_layout: dict[str, slice] = {}
         self.observation_size = 0
@@ -136,14 +152,16 @@ class WristMimicEnv:
         seed: int = 0,
         nthread: int | None = None,
         max_frames: int | None = None,
+        backend: str = "cpu",
+        backend_options: dict | None = None,
     ) -> WristMimicEnv:
         """Build the scene and reference of ``sequence_id`` from a canonical file (``max_frames``: keep only the
-        first frames of the reference)."""
+        first frames of the reference) on physics ``backend`` (``cpu`` or ``warp``)."""
         cfg = config or EnvConfig()
         with open_dataset(dataset) as ds:
             scene = build_scene(ds, sequence_id, scene_config)
             ref = load_reference(ds, scene, cfg.ig_points, 0, max_frames)  # point subset independent of the env seed
-        return cls(scene, ref, num_worlds, cfg, seed, nthread=nthread)
+        return cls(scene, ref, num_worlds, cfg, seed, backend, nthread, backend_options)
 
     @property
     def obs_layout(self) -> dict[str, slice]:
@@ -155,55 +173,63 @@ class WristMimicEnv:
         """Reset every world (reference state initialisation, or ``start_frames``)."""
         if seed is not None:
             self._gen.manual_seed(int(seed))
-        self._reset_worlds(torch.arange(self.num_worlds), start_frames)
+        every = torch.ones(self.num_worlds, dtype=torch.bool, device=self.device)
+        self._reset_worlds(every, None if start_frames is None else start_frames.to(self.device))
         return self._observe(), {}
 
     def sample_start_frames(self, n: int) -> torch.Tensor:
         """Frame 0 with probability ``reset_frame0_prob``, else uniform over [0, T - 2]."""
         T = self.ref.num_frames
-        uniform = torch.randint(0, max(T - 1, 1), (n,), generator=self._gen)
-        zero = torch.rand(n, generator=self._gen) < self.cfg.reset_frame0_prob
+        uniform = torch.randint(0, max(T - 1, 1), (n,), generator=self._gen, device=self.device)
+        zero = torch.rand(n, generator=self._gen, device=self.device) < self.cfg.reset_frame0_prob
         return torch.where(zero, torch.zeros_like(uniform), uniform)
 
-    def _reset_worlds(self, ids: torch.Tensor, frames: torch.Tensor | None = None) -> None:
-        if ids.numel() == 0:
-            return
-        f = self.sample_start_frames(len(ids)) if frames is None else frames.to(torch.long)
-        r, sc = self.ref, self.scene
-        model = sc.model
-        qpos = np.tile(model.qpos0, (len(ids), 1))
-        qvel = np.zeros((len(ids), model.nv))
-        fn = f.numpy()
-        qpos[:, 0:3] = r.root_pos[fn].numpy()
-        qpos[:, 3:7] = r.root_quat[fn].numpy()
-        qpos[:, sc.hinge_qposadr.reshape(-1)] = r.joint_angles[fn].numpy()
-        qvel[:, 0:3] = r.root_linvel[fn].numpy()
-        qvel[:, 3:6] = r.root_angvel_local[fn].numpy()
-        qvel[:, sc.hinge_dofadr.reshape(-1)] = r.joint_vel[fn].numpy()
-        for j, o in enumerate(sc.dynamic_objects):
-            qpos[:, o.qposadr : o.qposadr + 3] = r.obj_pos[fn, j].numpy()
-            qpos[:, o.qposadr + 3 : o.qposadr + 7] = r.obj_quat[fn, j].numpy()
-            qvel[:, o.dofadr : o.dofadr + 3] = r.obj_linvel[fn, j].numpy()
-            qvel[:, o.dofadr + 3 : o.dofadr + 6] = r.obj_angvel_local[fn, j].numpy()
-        self.backend.set_state(ids.numpy(), qpos, qvel)
-        self.frame[ids] = f
-        self.start[ids] = f
-        self.steps[ids] = 0
-        self.lost.reset(ids)
-        self._prev_joint_vel[ids] = r.joint_vel[f]
-        self._prev_obj_vel[ids] = torch.cat([r.obj_linvel[f], r.obj_angvel[f]], -1)
+    def reference_state(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(qpos, qvel) float64 of the reference at ``frames`` (N,): humanoid and dynamic objects."""
+        r, f = self.ref, frames.to(torch.long)
+        n, nv = len(f), self.scene.model.nv
+        qpos = self._qpos0.expand(n, -1).clone()
+        qvel = torch.zeros(n, nv, dtype=torch.float64, device=self.device)
+        qpos[:, 0:3], qpos[:, 3:7] = r.root_pos[f].double(), r.root_quat[f].double()
+        qpos[:, self._hinge_qpos] = r.joint_angles[f].double()
+        qvel[:, 0:3], qvel[:, 3:6] = r.root_linvel[f].double(), r.root_angvel_local[f].double()
+        qvel[:, self._hinge_dof] = r.joint_vel[f].double()
+        if len(self._obj_qpos):
+            k3 = torch.arange(3, device=self.device)
+            qpos[:, (self._obj_qpos[:, None] + k3).flatten()] = r.obj_pos[f].double().flatten(1)
+            qpos[:, (self._obj_qpos[:, None] + 3 + torch.arange(4, device=self.device)).flatten()] = (
+                r.obj_quat[f].double().flatten(1)
+            )
+            qvel[:, (self._obj_dof[:, None] + k3).flatten()] = r.obj_linvel[f].double().flatten(1)
+            qvel[:, (self._obj_dof[:, None] + 3 + k3).flatten()] = r.obj_angvel_local[f].double().flatten(1)
+        return qpos, qvel
+
+    def _reset_worlds(self, mask: torch.Tensor, frames: torch.Tensor | None = None) -> None:
+        """Reference state initialisation of the worlds where ``mask`` (N,) is true, at ``frames`` (N,) or
+        sampled start frames. Works on the whole batch with masks: no host synchronisation."""
+        f = self.sample_start_frames(self.num_worlds) if frames is None else frames.to(torch.long)
+        qpos, qvel = self.reference_state(f)
+        self.backend.reset(mask, qpos, qvel)
+        r, col = self.ref, mask[:, None]
+        self.frame = torch.where(mask, f, self.frame)
+        self.start = torch.where(mask, f, self.start)
+        self.steps = self.steps.masked_fill(mask, 0)
+        self.lost.counts = self.lost.counts.masked_fill(col, 0)
+        self._prev_joint_vel = torch.where(col, r.joint_vel[f], self._prev_joint_vel)
+        obj_vel = torch.cat([r.obj_linvel[f], r.obj_angvel[f]], -1)
+        self._prev_obj_vel = torch.where(col[..., None], obj_vel, self._prev_obj_vel)
 
     # -- state ---------------------------------------------------------------------------------------------
     def sim_state(self) -> SimState:
         """The simulated state of every world, from the backend's sensors."""
-        sd = torch.from_numpy(self.backend.sensordata).to(torch.float32)  # one conversion, then views
+        sd = self.backend.sensordata.to(torch.float32)  # one conversion (float64 on CPU), then gathers
         i = self._tidx
         contact = sd[:, i["contact"]]
         force = contact[..., 1:]
         obj_pos, obj_quat = sd[:, i["obj_pos"]], sd[:, i["obj_quat"]]
         r = self.ref
         points = quat_rotate(obj_quat[:, r.points_object], r.points_local) + obj_pos[:, r.points_object]
-        qvel = torch.from_numpy(self.backend.qvel[:, self._hinge_dof]).to(torch.float32)
+        qvel = self.backend.qvel[:, self._hinge_dof].to(torch.float32)
         return SimState(
             body_pos=sd[:, i["body_pos"]],
             body_quat=sd[:, i["body_quat"]],
@@ -276,7 +302,7 @@ class WristMimicEnv:
             torch.set_num_threads(threads)
 
     def _step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
-        self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(torch.float32)).numpy()
+        self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(self.device, torch.float32))
         self.backend.step(self._ctrl, self.scene.config.substeps)
         self.frame += 1
         self.steps += 1
@@ -300,9 +326,8 @@ class WristMimicEnv:
         }
         self._prev_joint_vel = s.joint_vel
         self._prev_obj_vel = torch.cat([s.obj_linvel, s.obj_angvel], -1)
-        ids = torch.nonzero(done).flatten()
-        if ids.numel():
-            self._reset_worlds(ids)
+        if self.device.type != "cpu" or bool(done.any()):  # on a GPU: always, masked (no host round trip)
+            self._reset_worlds(done)
             s = None
         return self._observe(s), reward, terminated, truncated, info
 
@@ -325,7 +350,7 @@ class WristMimicEnv:
         }
 
     def _window(self) -> tuple[torch.Tensor, torch.Tensor]:
-        t_c = torch.full((self.num_worlds,), self.ref.t_c, dtype=torch.long)
+        t_c = torch.full((self.num_worlds,), self.ref.t_c, dtype=torch.long, device=self.device)
         ph = W.phase(self.frame, t_c, self.cfg.window)
         return ph != W.OUTSIDE, ph
 
@@ -392,8 +417,7 @@ class WristMimicEnv:
         """Everything needed to continue bit-for-bit: physics state of every world, episode bookkeeping and
         the generator of start frames."""
         return {
-            "physics": torch.from_numpy(self.backend.state.copy()),
-            "sensordata": torch.from_numpy(self.backend.sensordata.copy()),
+            **self.backend.state_dict(),
             "frame": self.frame.clone(),
             "start": self.start.clone(),
             "steps": self.steps.clone(),
@@ -412,14 +436,14 @@ class WristMimicEnv:
                 f"checkpoint is for {state['sequence_id']} x {state['num_worlds']} worlds, this environment is "
                 f"{self.scene.sequence_id} x {self.num_worlds}"
             )
-        self.backend.load(state["physics"].numpy(), state["sensordata"].numpy())  # type: ignore[union-attr]
+        self.backend.load_state_dict(state)  # type: ignore[arg-type]
         self.frame[:] = state["frame"]  # type: ignore[index]
         self.start[:] = state["start"]  # type: ignore[index]
         self.steps[:] = state["steps"]  # type: ignore[index]
         self.lost.counts[:] = state["contact_lost"]  # type: ignore[index]
         self._prev_joint_vel[:] = state["prev_joint_vel"]  # type: ignore[index]
         self._prev_obj_vel[:] = state["prev_obj_vel"]  # type: ignore[index]
-        self._gen.set_state(state["generator"])  # type: ignore[arg-type]
+        self._gen.set_state(state["generator"].cpu())  # type: ignore[union-attr]
 
     def observe(self) -> torch.Tensor:
         """The current observation of every world (e.g. after :meth:`load_state_dict`)."""

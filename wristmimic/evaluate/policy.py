@@ -57,6 +57,11 @@ class RunPolicy:
     def act(self, obs: torch.Tensor, deterministic: bool = True) -> torch.Tensor:
         return self.policy.act(obs, deterministic=True)
 
+    def to(self, device: torch.device | str) -> RunPolicy:
+        """Move the network (and its normaliser) to ``device``, where the environment's observations are."""
+        self.policy.to(device)
+        return self
+
     @property
     def sigma(self) -> torch.Tensor:
         return torch.exp(self.policy.net.log_std.detach().to(torch.float32))

@@ -34,6 +34,7 @@ from wristmimic.evaluate.policy import EvalPolicy
 from wristmimic.evaluate.protocol import NOISE_MODES, Protocol, Split, available, load_split
 from wristmimic.evaluate.trials import Records, TrialSettings, make_env, run_trials
 from wristmimic.safe_io import atomic_output, sha256_file
+from wristmimic.sim.backend import BACKENDS
 
 EVAL_FORMAT, EVAL_VERSION = "wristmimic-eval", 1
 DATASET_LABELS = {"omomo": "OMOMO", "parahome": "ParaHome"}
@@ -101,9 +102,13 @@ def find_split(scene: str, name: str | None = None) -> Split | None:
     return None
 
 
-def _settings_dict(protocol: Protocol, policy: EvalPolicy, trials: TrialSettings, env: dict[str, Any]) -> dict:
+def _settings_dict(
+    protocol: Protocol, policy: EvalPolicy, trials: TrialSettings, env: dict[str, Any], backend: str = "cpu"
+) -> dict:
     m = policy.metadata
+    physics = {} if backend == "cpu" else {"backend": backend}  # CPU: as written before backends existed
     return {
+        **physics,
         "format": EVAL_FORMAT,
         "version": EVAL_VERSION,
         "protocol": protocol.name,
@@ -259,8 +264,11 @@ def evaluate_policy(
     split: str | None = None,
     chunk: int = 256,
     progress: bool = True,
+    backend: str = "cpu",
+    backend_options: dict | None = None,
 ) -> EvalResult:
-    """Run (or resume) ``protocol`` for ``policy`` into ``out``; raises :class:`EvalInterrupted` on Ctrl-C."""
+    """Run (or resume) ``protocol`` for ``policy`` into ``out`` on physics ``backend`` (``cpu`` / ``warp``; the
+    backend is part of the evaluation's settings); raises :class:`EvalInterrupted` on Ctrl-C."""
     meta = policy.metadata
     n_trials = protocol.trials if trials is None else int(trials)
     if n_trials < 1 or num_envs < 1 or chunk < 1:
@@ -269,6 +277,8 @@ def evaluate_policy(
         raise InputError(None, "--noise", f"{noise!r}", f"one of {', '.join(NOISE_MODES)}")
     if seed is not None and not 0 <= seed < 2**63:
         raise InputError(None, "--seed", f"{seed}", "an integer in [0, 2^63)")
+    if backend not in BACKENDS:
+        raise InputError(None, "--backend", f"{backend!r}", f"one of {', '.join(BACKENDS)}")
     settings = replace(
         TrialSettings.from_protocol(protocol),
         base_seed=protocol.base_seed if seed is None else int(seed),
@@ -278,7 +288,7 @@ def evaluate_policy(
     source = _check_dataset(meta, ds_path)
     sp = find_split(meta["scene"], split)
     env_dict = _env_dict(meta.get("env"))
-    expected = _settings_dict(protocol, policy, settings, env_dict)
+    expected = _settings_dict(protocol, policy, settings, env_dict, backend)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     manifest = out / "eval.json"
@@ -303,7 +313,17 @@ def evaluate_policy(
     t0, frames, ran = time.perf_counter(), 0, 0
     if start < n_trials:
         writer = _ChunkWriter(parts_dir, scene, settings.noise, start, n_trials, chunk)
-        env = make_env(meta, min(num_envs, n_trials - start), protocol.early_termination, nthread, ds_path)
+        env = make_env(
+            meta,
+            min(num_envs, n_trials - start),
+            protocol.early_termination,
+            nthread,
+            ds_path,
+            backend,
+            backend_options,
+        )
+        if hasattr(policy, "to"):
+            policy.to(env.device)  # type: ignore[attr-defined]
         try:
             with _progress(f"{scene} ({meta.get('variant', '')})", start, n_trials, progress) as advance:
                 writer.on_advance = advance

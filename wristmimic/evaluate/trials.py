@@ -63,8 +63,10 @@ def make_env(
     early_termination: str = "run",
     nthread: int | None = None,
     dataset: str | Path | None = None,
+    backend: str = "cpu",
+    backend_options: dict | None = None,
 ) -> WristMimicEnv:
-    """The evaluation environment of a policy's scene (``meta``: :attr:`EvalPolicy.metadata`)."""
+    """The evaluation environment of a policy's scene (``meta``: :attr:`EvalPolicy.metadata`) on ``backend``."""
     from wristmimic.scene import SceneConfig
 
     sc = meta.get("scene_config")
@@ -81,6 +83,8 @@ def make_env(
         seed=0,
         nthread=nthread,
         max_frames=meta.get("ref_frames"),
+        backend=backend,
+        backend_options=backend_options,
     )
 
 
@@ -89,13 +93,17 @@ def perturb_initial_state(
 ) -> torch.Tensor:
     """Add seeded Gaussian noise to the hinge angles and root position of worlds ``ids`` (just reset); returns
     the new observation of every world."""
-    rows = ids.numpy()
-    qpos, qvel = env.backend.qpos[rows].copy(), env.backend.qvel[rows].copy()
-    adr = env.scene.hinge_qposadr.reshape(-1)
-    zero = torch.zeros(len(ids), dtype=torch.long)
-    qpos[:, adr] += noise.joint_angle_rad * normal(seeds, zero, len(adr), NOISE_STREAM_JOINTS).double().numpy()
-    qpos[:, 0:3] += noise.root_position_m * normal(seeds, zero, 3, NOISE_STREAM_ROOT).double().numpy()
-    env.backend.set_state(rows, qpos, qvel)
+    dev = env.device
+    mask = torch.zeros(env.num_worlds, dtype=torch.bool, device=dev)
+    mask[ids.to(dev)] = True
+    rows = torch.zeros(env.num_worlds, dtype=torch.long)
+    rows[ids] = seeds  # every world gets a row of noise; only the masked ones are used
+    qpos, qvel = env.backend.qpos.double().clone(), env.backend.qvel.double().clone()
+    adr = torch.as_tensor(env.scene.hinge_qposadr.reshape(-1), device=dev)
+    zero = torch.zeros(env.num_worlds, dtype=torch.long)
+    qpos[:, adr] += noise.joint_angle_rad * normal(rows, zero, len(adr), NOISE_STREAM_JOINTS).double().to(dev)
+    qpos[:, 0:3] += noise.root_position_m * normal(rows, zero, 3, NOISE_STREAM_ROOT).double().to(dev)
+    env.backend.reset(mask, qpos, qvel)
     return env.observe()
 
 
@@ -130,9 +138,9 @@ def _run(
     stop: int,
     sink: Callable[[Records], None],
 ) -> int:
-    N, T = env.num_worlds, env.ref.num_frames
+    N, T, dev = env.num_worlds, env.ref.num_frames, env.device
     ref_contact = int(env.ref.hand[1:T].sum())
-    sigma = policy.sigma.to(torch.float32)
+    sigma = policy.sigma.to(dev, torch.float32)
     world_trial = torch.full((N,), -1, dtype=torch.long)
     take = min(N, stop - start)
     world_trial[:take] = torch.arange(start, start + take)
@@ -140,7 +148,7 @@ def _run(
     seeds = trial_seeds(settings.base_seed, world_trial.clamp_min(0))
     steps = torch.zeros(N, dtype=torch.long)
     sums = TrialSums.zeros(N)
-    obs, _ = env.reset(start_frames=torch.zeros(N, dtype=torch.long))
+    obs, _ = env.reset(start_frames=torch.zeros(N, dtype=torch.long, device=dev))
     sampled = settings.noise == "actions"
     if not sampled:
         obs = perturb_initial_state(env, torch.arange(take), seeds[:take], settings.initial_state_noise)
@@ -148,9 +156,11 @@ def _run(
     while bool((world_trial >= 0).any()):
         actions = act_rows(policy, obs)
         if sampled:
-            actions = actions + sigma * normal(seeds, steps, env.action_size, NOISE_STREAM_ACTIONS)
+            actions = actions + sigma * normal(seeds, steps, env.action_size, NOISE_STREAM_ACTIONS).to(dev)
         obs, _, terminated, truncated, info = env.step(actions)
-        sums.add(info["eval"])
+        # trial bookkeeping stays on the host: one small copy per step
+        terminated, truncated = terminated.cpu(), truncated.cpu()
+        sums.add({k: v.cpu() for k, v in info["eval"].items()})
         steps += 1
         done = (terminated | truncated) & (world_trial >= 0)
         if not bool(done.any()):
@@ -166,7 +176,7 @@ def _run(
             settings.max_obj_pos_err_m,
             settings.min_contact_ratio,
         )
-        reasons = info["termination_reason"][ids].tolist()
+        reasons = info["termination_reason"].cpu()[ids].tolist()
         n_frames = sums.frames[ids]
         frames += int(n_frames.sum())
         sink(

@@ -64,7 +64,7 @@ def rng_state(generator: torch.Generator) -> dict[str, Any]:
 
 def set_rng_state(state: dict[str, Any], generator: torch.Generator) -> None:
     torch.set_rng_state(state["torch"])
-    generator.set_state(state["generator"])
+    generator.set_state(state["generator"].cpu())
     keys = state["numpy_keys"].numpy().astype(np.uint32)
     np.random.set_state(
         (state["numpy_kind"], keys, state["numpy_pos"], state["numpy_has_gauss"], state["numpy_cached_gaussian"])

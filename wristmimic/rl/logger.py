@@ -15,6 +15,9 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from wristmimic.env.terminations import REASONS
 from wristmimic.safe_io import atomic_output
 
+_REASON_CODES = tuple(code for code in sorted(REASONS) if code != 0)
+"""Termination reasons counted per iteration (code 0 = none)."""
+
 TIME_COLUMNS = ("seconds", "frames_per_s")
 """Wall-clock columns of ``metrics.csv``: the only ones that differ between two runs with the same seed."""
 
@@ -35,43 +38,51 @@ class EpisodeStats:
 
     def _reset_iteration(self) -> None:
         self._steps = 0
-        self._reward = 0.0
-        self._terms: dict[str, float] = {}
-        self._lengths: list[torch.Tensor] = []
-        self._success = 0
-        self._reasons = {name: 0 for code, name in REASONS.items() if code != 0}
+        self._names: list[str] = []
+        self._sums: torch.Tensor | None = None  # float64 on the environment's device: no host sync per step
 
     def record(self, reward: torch.Tensor, terminated: torch.Tensor, info: dict) -> None:
-        """One environment step of every world (``info`` as returned by ``WristMimicEnv.step``)."""
+        """One environment step of every world (``info`` as returned by ``WristMimicEnv.step``). Sums stay on
+        the environment's device until :meth:`flush`."""
         self._steps += 1
-        self._reward += float(reward.mean())
-        for k, v in info["terms"].items():
-            if k.startswith("reward/"):
-                self._terms[k] = self._terms.get(k, 0.0) + float(v.float().mean())
         done = terminated | info["time_outs"]
-        if done.any():
-            self._lengths.append(info["episode_frames"][done])
-            success = int((info["time_outs"] & (info["frame"] >= self.num_frames - 1)).sum())
-            self._success += success
-            self.successes_total += success
-            self.episodes_total += int(done.sum())
-        for code in info["termination_reason"][terminated].tolist():
-            name = REASONS.get(int(code), str(code))
-            self._reasons[name] = self._reasons.get(name, 0) + 1
+        success = info["time_outs"] & (info["frame"] >= self.num_frames - 1)
+        terms = {k: v for k, v in info["terms"].items() if k.startswith("reward/")}
+        codes = torch.tensor(_REASON_CODES, device=reward.device)
+        by_reason = ((info["termination_reason"][:, None] == codes[None]) & terminated[:, None]).sum(0)
+        values = [
+            reward.double().mean(),
+            (info["episode_frames"] * done).sum().double(),
+            done.sum().double(),
+            success.sum().double(),
+            *(v.double().mean() for v in terms.values()),
+        ]
+        row = torch.cat([torch.stack(values), by_reason.double()])
+        if self._sums is None:
+            self._names = ["reward", "length_sum", "episodes", "success", *terms]
+            self._sums = row
+        else:
+            self._sums = self._sums + row
 
     def flush(self) -> dict[str, float]:
         """This iteration's means (NaN where no episode ended), then start a new iteration."""
-        lengths = torch.cat(self._lengths).float() if self._lengths else torch.zeros(0)
-        n = len(lengths)
+        names = self._names or ["reward", "length_sum", "episodes", "success"]
+        sums = self._sums.cpu().tolist() if self._sums is not None else [0.0] * (len(names) + len(_REASON_CODES))
+        named, reasons = dict(zip(names, sums, strict=False)), sums[len(names) :]
+        steps = max(self._steps, 1)
+        n = int(named["episodes"])
+        success = int(named["success"])
+        self.successes_total += success
+        self.episodes_total += n
         row = {
-            "reward_mean": self._reward / max(self._steps, 1),
-            "episode_length_mean": float(lengths.mean()) if n else math.nan,
+            "reward_mean": named["reward"] / steps,
+            "episode_length_mean": named["length_sum"] / n if n else math.nan,
             "episodes": n,
-            "success_rate": self._success / n if n else math.nan,
+            "success_rate": success / n if n else math.nan,
             "success_rate_total": self.successes_total / self.episodes_total if self.episodes_total else math.nan,
         }
-        row.update({k: v / max(self._steps, 1) for k, v in sorted(self._terms.items())})
-        row.update({f"termination/{k}": v for k, v in self._reasons.items()})
+        row.update({name: named[name] / steps for name in sorted(names[4:])})
+        row.update({f"termination/{REASONS[c]}": int(v) for c, v in zip(_REASON_CODES, reasons, strict=True)})
         self._reset_iteration()
         return row
 

@@ -89,5 +89,5 @@ class ActorCritic(nn.Module):
     def act(self, obs_n: torch.Tensor, generator: torch.Generator | None = None) -> tuple[torch.Tensor, ...]:
         """Sample actions for normalised observations: ``(actions, log_probs, mu, values)``."""
         mu = self.actor(obs_n)
-        actions = mu + torch.exp(self.log_std) * torch.randn(mu.shape, generator=generator)
+        actions = mu + torch.exp(self.log_std) * torch.randn(mu.shape, generator=generator, device=mu.device)
         return actions, self.log_prob(mu, actions), mu, self.value(obs_n)

@@ -49,7 +49,12 @@ class Policy:
         mu = self.net.actor(self.net.normalizer(obs))
         if deterministic:
             return mu
-        return mu + torch.exp(self.net.log_std) * torch.randn(mu.shape, generator=generator)
+        return mu + torch.exp(self.net.log_std) * torch.randn(mu.shape, generator=generator, device=mu.device)
+
+    def to(self, device: torch.device | str) -> Policy:
+        """Move the network to ``device`` (observations must be there too)."""
+        self.net.to(device)
+        return self
 
 
 def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:

@@ -66,7 +66,7 @@ class PPO:
     def update(self, storage: RolloutStorage, generator: torch.Generator) -> dict[str, float]:
         """Minibatch epochs over the rollout; returns mean losses and diagnostics under ``loss/...``."""
         c, pi = self.cfg, self.policy
-        sums: dict[str, float] = {}
+        sums: dict[str, torch.Tensor] = {}
         n = 0
         for mb in storage.minibatches(c.minibatch_size, c.epochs, generator):
             adv = mb["advantages"]
@@ -96,6 +96,7 @@ class PPO:
                     "loss/grad_norm_critic": critic_norm,
                 }
             for k, v in stats.items():
-                sums[k] = sums.get(k, 0.0) + float(v.detach())
+                sums[k] = sums[k] + v.detach() if k in sums else v.detach()
             n += 1
-        return {k: v / n for k, v in sums.items()}
+        values = torch.stack([v.double() for v in sums.values()]).cpu().tolist()  # one host sync per update
+        return {k: v / n for k, v in zip(sums, values, strict=True)}

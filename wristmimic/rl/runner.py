@@ -31,14 +31,15 @@ class Runner:
     def __init__(self, env: WristMimicEnv, cfg: PPOConfig, seed: int, run_dir: Path, config_text: str, metadata: dict):
         self.env, self.cfg, self.run_dir = env, cfg, Path(run_dir)
         self.config_text, self.metadata = config_text, metadata
-        torch.manual_seed(seed)  # network initialisation
-        self.gen = torch.Generator().manual_seed(seed)  # action noise and minibatch order
+        torch.manual_seed(seed)  # network initialisation (on the CPU, then moved: the same weights on any device)
+        dev = env.device
+        self.gen = torch.Generator(device=dev).manual_seed(seed)  # action noise and minibatch order
         self.obs, _ = env.reset(seed=seed)
         self.policy = ActorCritic(
             env.observation_size, env.action_size, cfg.actor_hidden, cfg.critic_hidden, cfg.log_std, cfg.obs_clip
-        )
+        ).to(dev)
         self.alg = PPO(self.policy, cfg)
-        self.storage = RolloutStorage(cfg.horizon, cfg.num_envs, env.observation_size, env.action_size)
+        self.storage = RolloutStorage(cfg.horizon, cfg.num_envs, env.observation_size, env.action_size, dev)
         self.stats = EpisodeStats(env.ref.num_frames)
         self.iteration, self.frames, self.seconds = 0, 0, 0.0
         self.stop_requested = False
@@ -106,7 +107,7 @@ class Runner:
         self.alg.optimizer.load_state_dict(state["optimizer"])
         set_rng_state(state["rng"], self.gen)
         self.env.load_state_dict(state["env"])
-        self.obs = state["obs"].clone()
+        self.obs = state["obs"].to(self.env.device)
         self.stats.load_state_dict(state["episodes"])
         self.storage.step = int(state["storage_step"])
         self.metrics = MetricsCsv(self.run_dir / "metrics.csv", keep_until=self.iteration)

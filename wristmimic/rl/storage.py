@@ -24,19 +24,25 @@ class RolloutStorage:
         step:         int, the next row to write (0 .. H); H means full.
     """
 
-    def __init__(self, horizon: int, num_envs: int, obs_size: int, action_size: int):
+    def __init__(
+        self, horizon: int, num_envs: int, obs_size: int, action_size: int, device: torch.device | str = "cpu"
+    ):
         self.horizon, self.num_envs = int(horizon), int(num_envs)
         H, N = self.horizon, self.num_envs
-        self.observations = torch.zeros(H, N, obs_size)
-        self.actions = torch.zeros(H, N, action_size)
-        self.rewards = torch.zeros(H, N)
-        self.terminated = torch.zeros(H, N)
-        self.time_outs = torch.zeros(H, N)
-        self.values = torch.zeros(H, N)
-        self.log_probs = torch.zeros(H, N)
-        self.mu = torch.zeros(H, N, action_size)
-        self.advantages = torch.zeros(H, N)
-        self.returns = torch.zeros(H, N)
+
+        def z(*shape: int) -> torch.Tensor:
+            return torch.zeros(*shape, device=device)
+
+        self.observations = z(H, N, obs_size)
+        self.actions = z(H, N, action_size)
+        self.rewards = z(H, N)
+        self.terminated = z(H, N)
+        self.time_outs = z(H, N)
+        self.values = z(H, N)
+        self.log_probs = z(H, N)
+        self.mu = z(H, N, action_size)
+        self.advantages = z(H, N)
+        self.returns = z(H, N)
         self.step = 0
 
     def add(
@@ -84,7 +90,7 @@ class RolloutStorage:
         }
         n = self.horizon * self.num_envs
         for _ in range(epochs):
-            order = torch.randperm(n, generator=generator)
+            order = torch.randperm(n, generator=generator, device=generator.device)
             for start in range(0, n, minibatch_size):
                 idx = order[start : start + minibatch_size]
                 yield {k: v[idx] for k, v in flat.items()}

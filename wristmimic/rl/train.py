@@ -21,6 +21,7 @@ from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, to_jso
 from wristmimic.rl.runner import Runner
 from wristmimic.safe_io import atomic_output, sha256_file
 from wristmimic.scene import SceneConfig
+from wristmimic.sim.backend import BACKENDS
 
 
 @dataclass
@@ -43,6 +44,10 @@ class TrainSpec:
     scene_config: SceneConfig = field(default_factory=SceneConfig)
     ref_frames: int | None = None
     """Keep only the first frames of the reference (a short task); None: the whole sequence."""
+    backend: str = "cpu"
+    """Physics backend: ``cpu`` (MuJoCo threads) or ``warp`` (MuJoCo Warp; policy and math on its device)."""
+    device: str | None = None
+    """Warp device (``cuda``, ``cuda:1``, ``cpu``); None: a GPU if there is one."""
 
 
 @dataclass
@@ -91,6 +96,7 @@ def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any
         "ppo": to_jsonable(spec.ppo),
         "env": to_jsonable(env_cfg),
         "scene_config": to_jsonable(spec.scene_config),
+        "physics": {"backend": spec.backend, "device": spec.device},
         "code": {"version": wristmimic.__version__, "git_commit": git_commit()},
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
@@ -99,6 +105,8 @@ def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any
 def _build(config: dict[str, Any], run_dir: Path, nthread: int | None) -> Runner:
     ppo = from_jsonable(PPOConfig, config["ppo"])
     env_cfg = from_jsonable(EnvConfig, config["env"])
+    physics = config.get("physics") or {"backend": "cpu"}  # runs from before backends existed: CPU
+    options = {"device": physics["device"]} if physics["backend"] == "warp" and physics.get("device") else None
     env = WristMimicEnv.from_file(
         config["dataset"]["path"],
         config["scene"],
@@ -108,6 +116,8 @@ def _build(config: dict[str, Any], run_dir: Path, nthread: int | None) -> Runner
         seed=config["seed"],
         nthread=nthread,
         max_frames=config["ref_frames"],
+        backend=physics["backend"],
+        backend_options=options,
     )
     meta = {
         "scene": config["scene"],
@@ -131,6 +141,8 @@ def start_run(spec: TrainSpec, run_dir: Path, nthread: int | None = None, progre
     _check_scene(Path(spec.dataset), spec.scene)
     if spec.variant not in VARIANTS:
         raise InputError(None, "variant", f"unknown variant {spec.variant!r}", f"one of {', '.join(VARIANTS)}")
+    if spec.backend not in BACKENDS:
+        raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
     env_cfg = spec.env or variant_config(spec.variant)
     config = _config_dict(spec, env_cfg, sha256_file(spec.dataset))
     run_dir.mkdir(parents=True, exist_ok=True)

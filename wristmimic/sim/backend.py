@@ -1,6 +1,10 @@
 """Physics backends: step N worlds of one scene; everything the environment reads comes from sensors.
 
-The interface is small on purpose, so a GPU backend (MuJoCo Warp) can slot in beside the CPU one.
+The interface is small on purpose: :class:`CpuRolloutBackend` (MuJoCo on CPU threads, the default) and
+:class:`wristmimic.sim.warp_backend.WarpBackend` (MuJoCo Warp, thousands of worlds on a GPU) implement it.
+Arrays cross the interface as torch tensors on the backend's ``device``: on the GPU backend they are views of
+the simulator's own memory, so observations, rewards and terminations are computed there without copies to
+the host.
 """
 
 from __future__ import annotations
@@ -12,39 +16,59 @@ from typing import Protocol
 
 import mujoco
 import numpy as np
+import torch
 from mujoco import rollout
 
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
+BACKENDS = ("cpu", "warp")
+"""Names accepted by :func:`make_backend` (and ``--backend`` on ``train`` / ``evaluate``)."""
+
 
 class PhysicsBackend(Protocol):
-    """N worlds of one model. Arrays are (N, ...) float64 numpy views owned by the backend."""
+    """N worlds of one model. Tensors are (N, ...) on :attr:`device`; treat them as read-only views."""
 
     num_worlds: int
     model: mujoco.MjModel
+    device: torch.device
+    physics_seconds: float
+    """Wall time spent inside the simulator so far (benchmarks; on a GPU, launch time unless synchronised)."""
 
     @property
-    def qpos(self) -> np.ndarray: ...  # (N, nq)
+    def qpos(self) -> torch.Tensor: ...  # (N, nq)
 
     @property
-    def qvel(self) -> np.ndarray: ...  # (N, nv)
+    def qvel(self) -> torch.Tensor: ...  # (N, nv)
 
     @property
-    def sensordata(self) -> np.ndarray: ...  # (N, nsensordata)
+    def sensordata(self) -> torch.Tensor: ...  # (N, nsensordata)
 
-    @property
-    def state(self) -> np.ndarray: ...  # (N, nstate) full physics state
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        """The physics state of every world (CPU tensors), enough to continue bit-for-bit on this backend."""
 
-    def load(self, state: np.ndarray, sensordata: np.ndarray) -> None:
-        """Restore a saved (state, sensordata) pair of every world."""
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        """Restore :meth:`state_dict`."""
 
-    def set_state(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        """Put worlds ``ids`` in the given state and evaluate their sensors there (no time passes)."""
+    def reset(self, mask: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
+        """Worlds where ``mask`` (N,) is true get state (``qpos``, ``qvel``) with time, activations and
+        solver warm start cleared, and their sensors evaluated there (no time passes); rows of other worlds
+        in ``qpos`` / ``qvel`` are ignored and those worlds are left as they are."""
 
-    def step(self, ctrl: np.ndarray, substeps: int) -> None:
+    def step(self, ctrl: torch.Tensor, substeps: int) -> None:
         """Advance every world ``substeps`` physics steps holding ``ctrl`` (N, nu)."""
 
     def close(self) -> None: ...
+
+
+def make_backend(name: str, model: mujoco.MjModel, num_worlds: int, nthread: int | None = None, **kw: object):
+    """A backend by name: ``cpu`` (default) or ``warp`` (``device=`` "cuda" / "cpu", ``nconmax=``, ``njmax=``)."""
+    if name == "cpu":
+        return CpuRolloutBackend(model, num_worlds, nthread)
+    if name == "warp":
+        from wristmimic.sim.warp_backend import WarpBackend
+
+        return WarpBackend(model, num_worlds, **kw)  # type: ignore[arg-type]
+    raise ValueError(f"unknown physics backend {name!r}: expected one of {', '.join(BACKENDS)}")
 
 
 class CpuRolloutBackend:
@@ -52,8 +76,11 @@ class CpuRolloutBackend:
 
     Sensor values after :meth:`step` are those MuJoCo computed at the start of the last physics step
     (``mj_step`` evaluates sensors before integrating), i.e. one physics step (1/120 s) behind ``qpos``;
-    after :meth:`set_state` they are exact.
+    after :meth:`reset` they are exact. Every control step starts from a cleared solver warm start (the warm
+    start is not part of the saved state), which the Warp backend reproduces.
     """
+
+    device = torch.device("cpu")
 
     def __init__(self, model: mujoco.MjModel, num_worlds: int, nthread: int | None = None):
         self.model = model
@@ -75,40 +102,44 @@ class CpuRolloutBackend:
         self._qpos = slice(1, 1 + model.nq)
         self._qvel = slice(1 + model.nq, 1 + model.nq + model.nv)
         self._out_state: np.ndarray | None = None
-        self.physics_seconds = 0.0
-        """Wall time spent inside MuJoCo (rollout calls) so far, for benchmarks."""
         self._out_sensor: np.ndarray | None = None
+        self.physics_seconds = 0.0
 
     @property
-    def qpos(self) -> np.ndarray:
-        return self._state[:, self._qpos]
+    def qpos(self) -> torch.Tensor:
+        return torch.from_numpy(self._state[:, self._qpos])
 
     @property
-    def qvel(self) -> np.ndarray:
-        return self._state[:, self._qvel]
+    def qvel(self) -> torch.Tensor:
+        return torch.from_numpy(self._state[:, self._qvel])
 
     @property
-    def sensordata(self) -> np.ndarray:
-        return self._sensor
+    def sensordata(self) -> torch.Tensor:
+        return torch.from_numpy(self._sensor)
 
     @property
     def state(self) -> np.ndarray:
+        """(N, nstate) MuJoCo full-physics state of every world (numpy view; benchmarks compare raw rollouts)."""
         return self._state
 
-    def load(self, state: np.ndarray, sensordata: np.ndarray) -> None:
-        if state.shape != self._state.shape or sensordata.shape != self._sensor.shape:
-            raise ValueError(f"saved physics state {state.shape} does not fit {self._state.shape}")
-        self._state[:] = state
-        self._sensor[:] = sensordata
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        return {"physics": torch.from_numpy(self._state.copy()), "sensordata": torch.from_numpy(self._sensor.copy())}
 
-    def set_state(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        ids = np.asarray(ids)
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        phys, sens = state["physics"].numpy(), state["sensordata"].numpy()
+        if phys.shape != self._state.shape or sens.shape != self._sensor.shape:
+            raise ValueError(f"saved physics state {phys.shape} does not fit {self._state.shape}")
+        self._state[:] = phys
+        self._sensor[:] = sens
+
+    def reset(self, mask: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
+        ids = np.flatnonzero(mask.cpu().numpy())
         if ids.size == 0:
             return
         st = self._state[ids]
         st[:, 0] = 0.0
-        st[:, self._qpos] = qpos
-        st[:, self._qvel] = qvel
+        st[:, self._qpos] = qpos.cpu().numpy()[ids]
+        st[:, self._qvel] = qvel.cpu().numpy()[ids]
         st[:, 1 + self.model.nq + self.model.nv :] = 0.0
         ctrl = np.zeros((len(ids), 1, self.model.nu))
         t0 = time.perf_counter()
@@ -117,18 +148,20 @@ class CpuRolloutBackend:
         self._state[ids] = st
         self._sensor[ids] = sens[:, 0]
 
-    def step(self, ctrl: np.ndarray, substeps: int) -> None:
+    def step(self, ctrl: torch.Tensor, substeps: int) -> None:
         n = self.num_worlds
         if self._out_state is None or self._out_state.shape[1] != substeps:
             self._out_state = np.empty((n, substeps, self.nstate))
             self._out_sensor = np.empty((n, substeps, self.model.nsensordata))
-        ctrl = np.ascontiguousarray(np.broadcast_to(ctrl[:, None, :], (n, substeps, self.model.nu)))
+        c = ctrl.detach().cpu().numpy() if isinstance(ctrl, torch.Tensor) else np.asarray(ctrl)
+        c = c.astype(np.float64, copy=False)
+        c = np.ascontiguousarray(np.broadcast_to(c[:, None, :], (n, substeps, self.model.nu)))
         t0 = time.perf_counter()
         self._pool.rollout(
             self.model,
             self._datas,
             self._state,
-            ctrl,
+            c,
             nstep=substeps,
             state=self._out_state,
             sensordata=self._out_sensor,

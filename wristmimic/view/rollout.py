@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from wristmimic.env.observations import SimState
     from wristmimic.env.vec_env import WristMimicEnv
     from wristmimic.evaluate.policy import EvalPolicy
+    from wristmimic.sim.backend import PhysicsBackend
 
 Actor = Callable[[torch.Tensor], torch.Tensor]
 """Observations (N, obs) -> actions (N, act), e.g. ``lambda obs: policy.act(obs, deterministic=True)``;
@@ -29,46 +30,50 @@ called once per step, in order."""
 
 
 class KeepStateBeforeReset:
-    """A physics backend wrapper that keeps the sensors of every world just before :meth:`set_state`."""
+    """A physics backend wrapper that keeps the sensors of every world just before :meth:`reset`."""
 
-    def __init__(self, inner: object):
+    def __init__(self, inner: PhysicsBackend):
         self.inner = inner
-        self.num_worlds = inner.num_worlds  # type: ignore[attr-defined]
-        self.model = inner.model  # type: ignore[attr-defined]
-        self.before_reset: np.ndarray | None = None
-        self._shown: np.ndarray | None = None
+        self.num_worlds = inner.num_worlds
+        self.model = inner.model
+        self.device = inner.device
+        self.before_reset: torch.Tensor | None = None
+        self._shown: torch.Tensor | None = None
 
     @property
-    def qpos(self) -> np.ndarray:
-        return self.inner.qpos  # type: ignore[attr-defined]
+    def physics_seconds(self) -> float:
+        return self.inner.physics_seconds
 
     @property
-    def qvel(self) -> np.ndarray:
-        return self.inner.qvel  # type: ignore[attr-defined]
+    def qpos(self) -> torch.Tensor:
+        return self.inner.qpos
 
     @property
-    def state(self) -> np.ndarray:
-        return self.inner.state  # type: ignore[attr-defined]
+    def qvel(self) -> torch.Tensor:
+        return self.inner.qvel
 
     @property
-    def sensordata(self) -> np.ndarray:
-        return self.inner.sensordata if self._shown is None else self._shown  # type: ignore[attr-defined]
+    def sensordata(self) -> torch.Tensor:
+        return self.inner.sensordata if self._shown is None else self._shown
 
-    def load(self, state: np.ndarray, sensordata: np.ndarray) -> None:
-        self.inner.load(state, sensordata)  # type: ignore[attr-defined]
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        return self.inner.state_dict()
 
-    def set_state(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        self.before_reset = np.array(self.inner.sensordata, copy=True)  # type: ignore[attr-defined]
-        self.inner.set_state(ids, qpos, qvel)  # type: ignore[attr-defined]
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        self.inner.load_state_dict(state)
 
-    def step(self, ctrl: np.ndarray, substeps: int) -> None:
-        self.inner.step(ctrl, substeps)  # type: ignore[attr-defined]
+    def reset(self, mask: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
+        self.before_reset = self.inner.sensordata.clone()
+        self.inner.reset(mask, qpos, qvel)
+
+    def step(self, ctrl: torch.Tensor, substeps: int) -> None:
+        self.inner.step(ctrl, substeps)
 
     def close(self) -> None:
-        self.inner.close()  # type: ignore[attr-defined]
+        self.inner.close()
 
     @contextlib.contextmanager
-    def showing(self, sensordata: np.ndarray) -> Iterator[None]:
+    def showing(self, sensordata: torch.Tensor) -> Iterator[None]:
         """Make ``sensordata`` the backend's sensors for the duration (positions and contacts only: joint
         velocities still come from the current state)."""
         self._shown = sensordata
@@ -115,7 +120,7 @@ def run_rollout(env: WristMimicEnv, actor: Actor, start_frame: int = 0, max_step
 
 def _stack(states: list[SimState], frames: list[int], rewards: list[float], end: str) -> SimTrack:
     def take(name: str) -> np.ndarray:
-        return np.stack([getattr(s, name)[0].numpy() for s in states])
+        return np.stack([getattr(s, name)[0].cpu().numpy() for s in states])
 
     return SimTrack(
         frames=np.asarray(frames, dtype=np.int64),
