@@ -48,7 +48,9 @@ def _sync(device: torch.device) -> None:
 
 
 def bench_step(path: Path, sid: str, worlds: int, steps: int, device: str, cfg: EnvConfig) -> dict[str, float]:
-    env = WristMimicEnv.from_file(path, sid, worlds, config=cfg, seed=0, backend="warp", backend_options={"device": device})
+    env = WristMimicEnv.from_file(
+        path, sid, worlds, config=cfg, seed=0, backend="warp", backend_options={"device": device}
+    )
     sub = env.scene.config.substeps
     env.reset(seed=0)
     raw = WarpBackend(env.scene.model, worlds, device=device)

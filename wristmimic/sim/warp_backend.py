@@ -32,13 +32,14 @@ STATE_FIELDS = ("qpos", "qvel", "act", "time", "ctrl", "sensordata")
 def import_warp() -> tuple[Any, Any]:
     """``(warp, mujoco_warp)``, or an :class:`InputError` that says how to install them."""
     try:
-        import mujoco_warp as mjw
         import warp as wp
+
+        wp.config.log_level = wp.LOG_WARNING  # before Warp initialises: no banner, no per-module compile lines
+        import mujoco_warp as mjw
     except ImportError as exc:
         raise InputError(
             None, "--backend warp", f"needs MuJoCo Warp ({exc.name} is not installed)", "pip install 'wristmimic[warp]'"
         ) from None
-    wp.config.quiet = True
     wp.init()
     return wp, mjw
 
