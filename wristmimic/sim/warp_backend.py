@@ -50,12 +50,16 @@ def default_device() -> str:
 
 
 def contact_capacity(model: mujoco.MjModel) -> tuple[int, int]:
-    """Per-world (nconmax, njmax) for a WristMimic scene: room for every geom of the humanoid and objects to
-    touch the floor, a support or another object at up to 4 points at once, and the joint limits."""
+    """Per-world (nconmax, njmax) for a WristMimic scene: a contact for every geom that can move (a humanoid
+    lying on the floor, a grasp with every finger segment), at least 128, and 4 constraint rows per contact
+    (pyramidal friction cone, condim 3) plus a row per limited joint. Measured with random flailing actions
+    (8 worlds x 60 control steps): at most 12 / 28 contacts and 156 / 127 rows per world on
+    sub2_largetable_000 / s110_move_kettle, against 128 / 144 contacts and 665 / 756 rows here. Memory grows
+    with njmax x nv per world; MuJoCo Warp prints a warning and :meth:`WarpBackend.overflowed` turns true if a
+    world runs out."""
     movable = int(np.sum(model.body_rootid[model.geom_bodyid] != 0))  # geoms on bodies that can move
-    nconmax = max(128, 4 * movable)
-    nlimit = int(np.sum(model.jnt_limited)) * 3  # a ball/hinge limit row each (hinges here)
-    return nconmax, 4 * nconmax + nlimit
+    nconmax = max(128, movable)
+    return nconmax, 4 * nconmax + int(np.sum(model.jnt_limited))
 
 
 class WarpBackend:
