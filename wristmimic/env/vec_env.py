@@ -26,6 +26,7 @@ from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import RewardInputs, compute_reward
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
 from wristmimic.env.torch_math import quat_angle, quat_rotate
+from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
 from wristmimic.sim.backend import CpuRolloutBackend, PhysicsBackend
@@ -86,6 +87,14 @@ class WristMimicEnv:
         nthread: int | None = None,
     ):
         self.scene, self.ref, self.cfg = scene, reference, config or EnvConfig()
+        if self.cfg.finger_targets and scene.humanoid.hand:
+            raise InputError(
+                None,
+                f"variant {self.cfg.variant}",
+                f"needs finger pose targets, but humanoid {scene.humanoid.name} has a swapped hand "
+                f"({scene.humanoid.hand}) whose finger reference is only its rest pose",
+                "a variant without finger targets (wristmimic, decoupled, reward-modulation-only, reset-only)",
+            )
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
         self.backend = backend or CpuRolloutBackend(scene.model, self.num_worlds, nthread)
