@@ -288,3 +288,17 @@ def test_swapped_real_humanoids(which: str, request: pytest.FixtureRequest, user
             before = finger_scene_ranges(src, sid)
             assert {k: v.tolist() for k, v in ranges.items()} == {k: v.tolist() for k, v in before.items()}
     check_env_steps(tmp_path / f"{which}-smplx-free.h5", sid)
+
+
+def test_swapping_twice_uses_the_hand_the_humanoid_has_now(synth_h5: Path, tmp_path: Path) -> None:
+    """parahome-box on an SMPL-X humanoid, then back to smplx-intermimic: the SMPL-X hand is no longer the
+    humanoid's own, so it comes from the synthetic hand; the wrist reference survives both swaps."""
+    box, back = tmp_path / "box.h5", tmp_path / "back.h5"
+    swap_hands(synth_h5, "synth_default", "parahome-box", box)
+    r = swap_hands(box, "synth_default", "smplx-intermimic", back)
+    assert r.hand_source.startswith("wristmimic.synth SMPL-X hand") and r.num_fingers == (38, 30)
+    assert r.humanoid_id == "synth_h170+parahome-box+smplx-intermimic" and validate(back) == []
+    pos, rot = check_wrist_replay(back, synth_h5, "synth_default")
+    assert pos < TOL and rot < TOL
+    again = swap_hands(back, "synth_default", "parahome-box", tmp_path / "again.h5")
+    assert again.hand_source.startswith("ParaHome box hand regenerated")

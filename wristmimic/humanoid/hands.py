@@ -223,9 +223,17 @@ def _hand_reach(skel: Skeleton, wrist: int) -> float:
     return far
 
 
-def _smplx_hands(skel: Skeleton, family: str, wrists: tuple[int, int]) -> tuple[HandSide, HandSide, str]:
-    """Left and right SMPL-X hands: the humanoid's own (SMPL-X family) or the synthetic one sized to it."""
-    if family == "smplx":
+def current_hand(family: str, hand: str = "") -> str:
+    """Geometry of the hand a humanoid has now: ``smplx``, ``parahome-box`` or ``custom`` (a user MJCF hand)."""
+    if hand:
+        base = hand.split("/")[0]
+        return BUILTIN_HANDS[base].geometry if base in BUILTIN_HANDS else "custom"
+    return {"smplx": "smplx", "parahome": "parahome-box"}.get(family, "custom")
+
+
+def _smplx_hands(skel: Skeleton, current: str, wrists: tuple[int, int]) -> tuple[HandSide, HandSide, str]:
+    """Left and right SMPL-X hands: the humanoid's own (if it has one) or the synthetic one sized to it."""
+    if current == "smplx":
         model, src, wl, wr = skel.model, "the humanoid's own SMPL-X hand", wrists[0] + 1, wrists[1] + 1
     else:
         from wristmimic.synth.humanoid import build_humanoid
@@ -284,12 +292,15 @@ def _parahome_box_side(skel: Skeleton, wrist: int, side: str, prefix: str) -> Ha
     return extract_side(model, _model_body(model, f"j{side}Wrist"))
 
 
-def _parahome_hands(skel: Skeleton, family: str, wrists: tuple[int, int]) -> tuple[HandSide, HandSide, str]:
-    if family == "parahome":
+def _parahome_hands(skel: Skeleton, current: str, wrists: tuple[int, int]) -> tuple[HandSide, HandSide, str]:
+    if current == "parahome-box":
         src = "the humanoid's own ParaHome box hand"
         return extract_side(skel.model, wrists[0] + 1, src), extract_side(skel.model, wrists[1] + 1, src), src
-    if family != "smplx":
-        raise InputError(None, "hand parahome-box", f"cannot be built for a {family!r} humanoid", "smplx or parahome")
+    if current != "smplx":
+        raise InputError(
+            None, "hand parahome-box", f"cannot be built from the humanoid's {current} hand",
+            "a humanoid with an SMPL-X or ParaHome hand",
+        )  # fmt: skip
     left = _parahome_box_side(skel, wrists[0], "Left", "L_")
     right = _parahome_box_side(skel, wrists[1], "Right", "R_")
     return left, right, "ParaHome box hand regenerated from the humanoid's SMPL-X hand joints"
@@ -330,11 +341,13 @@ def resolve_hand(
     family: str,
     roles: dict[str, np.ndarray],
     *,
+    current: str | None = None,
     palm: str = "palm",
     left_palm: str | None = None,
     ranges: str | None = None,
 ) -> Hand:
-    """A built-in hand name or an MJCF path -> both sides of that hand for this humanoid."""
+    """A built-in hand name or an MJCF path -> both sides of that hand for this humanoid (``current``: the geometry
+    of the hand it has now, :func:`current_hand`; default from the family)."""
     wrists = (int(roles["wrists"][0]), int(roles["wrists"][1]))
     if ranges is not None and ranges not in RANGE_MODES:
         raise InputError(None, "--ranges", f"{ranges!r}", f"one of {', '.join(RANGE_MODES)}")
@@ -342,7 +355,7 @@ def resolve_hand(
     if name in BUILTIN_HANDS:
         b = BUILTIN_HANDS[name]
         build = _smplx_hands if b.geometry == "smplx" else _parahome_hands
-        left, right, src = build(skel, family, wrists)
+        left, right, src = build(skel, current or current_hand(family), wrists)
         mode = ranges or b.ranges
         label = name if mode == b.ranges else f"{name}/{mode}"
         return Hand(label, left, right, mode, src)
@@ -388,8 +401,7 @@ def _side_elements(side: HandSide, deg: bool) -> tuple[list[ET.Element], list[ET
     for i, el in enumerate(bodies):
         p = int(side.parents[i])
         (top.append(el) if p < 0 else bodies[p].append(el))
-    # joints must precede child bodies in MJCF only by convention; reorder: geoms, joints, then bodies
-    for el in bodies:
+    for el in bodies:  # geoms, joints, then child bodies (readable MJCF)
         kids = [c for c in el if c.tag == "body"]
         for c in kids:
             el.remove(c)
@@ -473,7 +485,10 @@ def build_swapped_humanoid(hum: HumanoidRecord, hand: Hand, hid: str, source: st
     profile = detect_profile(skel, source)
     wrist_names = (profile.left_wrist, profile.right_wrist)
     if hand.ranges == "free":
-        full = lambda s: _with_ranges(s, np.tile([-np.pi, np.pi], (len(s.names), 3, 1)))  # noqa: E731
+
+        def full(side: HandSide) -> HandSide:
+            return _with_ranges(side, np.tile([-np.pi, np.pi], (len(side.names), 3, 1)))
+
         hand = replace(hand, left=full(hand.left), right=full(hand.right))
     mjcf = graft_hands(hum.mjcf, wrist_names, hand)
     new = load_skeleton(mjcf, f"{source} with hand {hand.name}")
@@ -481,8 +496,12 @@ def build_swapped_humanoid(hum: HumanoidRecord, hand: Hand, hid: str, source: st
     if hand.ranges == "intermimic":
         from wristmimic.scene import finger_ranges
 
-        fr = finger_ranges(new, roles)
-        pick = lambda s: _with_ranges(s, np.stack([fr[new.index(n)] for n in s.names]))  # noqa: E731
+        fr = finger_ranges(new, roles)  # chains follow first children: bodies off them keep the hand's own
+
+        def pick(side: HandSide) -> HandSide:
+            own = zip(side.names, side.ranges, strict=True)
+            return _with_ranges(side, np.stack([fr.get(new.index(n), r) for n, r in own]))
+
         hand = replace(hand, left=pick(hand.left), right=pick(hand.right))
         mjcf = graft_hands(hum.mjcf, wrist_names, hand)
         new = load_skeleton(mjcf, f"{source} with hand {hand.name}")
@@ -620,7 +639,8 @@ def swap_hands(
         hum = ds.humanoid(view.humanoid_id)
         where = f"{dataset}:humanoids/{view.humanoid_id}"
         old = load_skeleton(hum.mjcf, where)
-        h = resolve_hand(hand, old, hum.family, hum.roles, palm=palm, left_palm=left_palm, ranges=ranges)
+        kind = current_hand(hum.family, hum.hand)
+        h = resolve_hand(hand, old, hum.family, hum.roles, current=kind, palm=palm, left_palm=left_palm, ranges=ranges)
         hid = f"{view.humanoid_id}+{h.name.replace('/', '-')}"
         rec, new = build_swapped_humanoid(hum, h, hid, where)
         seq = view.load()
