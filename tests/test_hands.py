@@ -92,6 +92,15 @@ def check_roles(path: Path, original: Path, sid: str, fingers_per_hand: int) -> 
     assert r["fingers"].isdisjoint(r["key_bodies"]) and 0 not in r["key_bodies"]
     assert r["contact_bodies"] == r["key_bodies"] | r["left_fingertips"] | r["right_fingertips"]
     assert r["non_finger"] == set(range(skel.num_bodies)) - r["fingers"]
+    # the hand extends beyond the wrist along the forearm (T-pose convention kept)
+    d = mujoco.MjData(skel.model)
+    d.qpos[3] = 1
+    mujoco.mj_kinematics(skel.model, d)
+    for side, w in (("left", 0), ("right", 1)):
+        wb = int(h.roles["wrists"][w]) + 1
+        arm = d.xpos[wb] - d.xpos[skel.model.body_parentid[wb]]
+        tips = (d.xpos[h.roles[f"{side}_fingertips"] + 1] - d.xpos[wb]).mean(axis=0)
+        assert tips @ arm / np.linalg.norm(tips) / np.linalg.norm(arm) > 0.8
     names = lambda hh, role: [hh.body_names[b] for b in hh.roles[role]]  # noqa: E731
     for role in ("key_bodies", "wrists", "left_arm", "right_arm", "feet", "head", "root"):
         assert names(h, role) == names(h0, role), role

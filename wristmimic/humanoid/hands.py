@@ -76,7 +76,9 @@ BUILTIN_HANDS: dict[str, BuiltinHand] = {
     for h in (
         BuiltinHand("smplx-intermimic", "smplx", "intermimic", "SMPL-X hand, InterMimic's finger joint ranges"),
         BuiltinHand("smplx-free", "smplx", "free", "SMPL-X hand, every finger hinge in [-pi, pi] (OmniGrasp-style)"),
-        BuiltinHand("parahome-box", "parahome-box", "intermimic", "SkillMimic's ParaHome box hand (19 bodies)"),
+        BuiltinHand(
+            "parahome-box", "parahome-box", "intermimic", "SkillMimic's ParaHome box hand (19 finger bodies per hand)"
+        ),
     )
 }
 """Built-in hands by name."""
