@@ -400,14 +400,12 @@ def _side_elements(side: HandSide, deg: bool) -> tuple[list[ET.Element], list[ET
                 "damping": str(FINGER_GAINS[1]), "armature": "0.02",
             }))  # fmt: skip
     top = []
-    for i, el in enumerate(bodies):
+    for i, el in enumerate(bodies):  # parents precede children, so each body's geoms and joints come first
         p = int(side.parents[i])
-        (top.append(el) if p < 0 else bodies[p].append(el))
-    for el in bodies:  # geoms, joints, then child bodies (readable MJCF)
-        kids = [c for c in el if c.tag == "body"]
-        for c in kids:
-            el.remove(c)
-            el.append(c)
+        if p < 0:
+            top.append(el)
+        else:
+            bodies[p].append(el)
     return [_geom_el(g) for g in side.geoms if g.body == -1], top
 
 
@@ -427,7 +425,7 @@ def graft_hands(mjcf: str, wrist_names: tuple[str, str], hand: Hand) -> str:
     deg = _degrees(root)
     removed: set[str] = set()
     new_joints: list[str] = []
-    wrist_act: dict[str, ET.Element] = {}
+    tmpl: ET.Element | None = None  # the actuator of a wrist hinge: new hinges get one like it
     by_name = {el.get("name"): el for el in root.iter("body")}
     taken = set(by_name)
     for wname, side in zip(wrist_names, (hand.left, hand.right), strict=True):
@@ -460,13 +458,12 @@ def graft_hands(mjcf: str, wrist_names: tuple[str, str], hand: Hand) -> str:
                 refs = {v for e in el.iter() for k, v in e.attrib.items() if k != "name"}
                 if refs & removed:
                     sec.remove(el)
-                elif section == "actuator" and el.get("joint") in wrist_joints:
-                    wrist_act.setdefault("tmpl", el)
+                elif section == "actuator" and el.get("joint") in wrist_joints and tmpl is None:
+                    tmpl = el
     for kf in root.findall("keyframe"):
         root.remove(kf)
     act = root.find("actuator")
     if act is not None:
-        tmpl = wrist_act.get("tmpl")
         tag = tmpl.tag if tmpl is not None else "motor"
         attrs = {
             k: v for k, v in (tmpl.attrib if tmpl is not None else {"gear": "1"}).items() if k not in ("name", "joint")
