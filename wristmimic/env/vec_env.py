@@ -87,14 +87,6 @@ class WristMimicEnv:
         nthread: int | None = None,
     ):
         self.scene, self.ref, self.cfg = scene, reference, config or EnvConfig()
-        if self.cfg.finger_targets and scene.humanoid.hand:
-            raise InputError(
-                None,
-                f"variant {self.cfg.variant}",
-                f"needs finger pose targets, but humanoid {scene.humanoid.name} has a swapped hand "
-                f"({scene.humanoid.hand}) whose finger reference is only its rest pose",
-                "a variant without finger targets (wristmimic, decoupled, reward-modulation-only, reset-only)",
-            )
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
         self.backend = backend or CpuRolloutBackend(scene.model, self.num_worlds, nthread)
@@ -114,6 +106,14 @@ class WristMimicEnv:
         non_finger = torch.as_tensor(roles["non_finger"], dtype=torch.long)
         self.tracked = torch.cat([key, fingers]) if self.cfg.finger_targets else key
         self.rotated = torch.cat([non_finger, fingers]) if self.cfg.finger_targets else non_finger
+        if self.cfg.finger_targets and scene.humanoid.hand:
+            raise InputError(
+                None,
+                f"variant {self.cfg.variant}",
+                f"needs finger pose targets, but humanoid {scene.humanoid.name} has a swapped hand "
+                f"({scene.humanoid.hand}) whose finger reference is only its rest pose",
+                "a variant without finger targets (wristmimic, decoupled, reward-modulation-only, reset-only)",
+            )
         self.goal_contact = key
         self.all_bodies = torch.arange(scene.skeleton.num_bodies)
         self.hands = (torch.as_tensor(roles["left_hand"]), torch.as_tensor(roles["right_hand"]))
