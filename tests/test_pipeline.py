@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
@@ -107,8 +108,54 @@ def test_bad_pipeline_files_fail_with_one_line(tmp_path: Path) -> None:
     assert r.exit_code == 1 and "file not found" in r.output
 
 
-@pytest.mark.parametrize("name", ["omomo", "parahome"])
+@pytest.mark.parametrize("name", ["omomo", "parahome", "hands"])
 def test_shipped_pipelines_parse(name: str) -> None:
     spec = load_spec(REPO / "pipelines" / f"{name}.toml")
     assert set(spec) - {"pipeline"} <= set(STAGES) and spec["train"]["preset"] == "cpu"
     assert Path(spec["convert"]["source"]).name in ("intermimic_omomo", "skillmimic_parahome")
+
+
+def test_hands_pipeline_trains_evaluates_and_reports_one_scene_per_hand(tmp_path: Path) -> None:
+    """hands -> train -> evaluate -> report on the synthetic scene: one swapped file, run and evaluation per hand,
+    the report's hands table has one row per hand; a second run does no work."""
+    from wristmimic.synth import generate
+
+    src = generate(tmp_path / "synth.h5", variants=("default",))
+    spec = tmp_path / "hands.toml"
+    spec.write_text(
+        f"""
+[pipeline]
+work_dir = "{tmp_path / "work"}"
+[hands]
+dataset = "{src}"
+scene = "synth_default"
+hands = ["smplx-intermimic", "parahome-box"]
+[train]
+ref_frames = 12
+[train.ppo]
+num_envs = 2
+horizon = 4
+minibatch_size = 8
+epochs = 1
+actor_hidden = [16]
+critic_hidden = [16]
+max_frames = 16
+[evaluate]
+protocol = "quick"
+trials = 2
+num_envs = 2
+[report]
+output = "{tmp_path / "report"}"
+"""
+    )
+    ctx = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    assert [p.name for p in ctx.outputs["datasets"]] == [
+        "synth_default-smplx-intermimic.h5",
+        "synth_default-parahome-box.h5",
+    ]
+    assert set(_statuses(ctx).values()) == {"ran"} and len(ctx.summary) == 7  # 2 hands, 2 trains, 2 evals, report
+    hands = pd.read_csv(tmp_path / "report" / "hands.csv")
+    assert hands["hand"].tolist() == ["smplx-intermimic", "parahome-box"] and (hands["trials"] == 2).all()
+    assert "## Hand morphology" in (tmp_path / "report" / "summary.md").read_text()
+    again = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    assert set(_statuses(again).values()) == {"up to date"}

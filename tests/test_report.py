@@ -173,3 +173,33 @@ def test_a_split_keeps_its_scenes_and_reports_what_is_missing(evals: Path, tmp_p
     assert list(pd.read_csv(res.out / "paper_table.csv").columns) == ["method", "OMOMO", "Avg."]
     with pytest.raises(InputError, match="unknown split 'nope'"):
         build_report([evals], tmp_path / "rep2", splits=["nope"])
+
+
+def test_hands_table_when_evaluations_differ_by_hand(tmp_path: Path) -> None:
+    """Evaluations of swapped hands (paper Table 4): one row per hand; the method label carries the hand, so the
+    per-scene tables keep them apart."""
+    from wristmimic.evaluate.runner import method_label
+
+    root = tmp_path / "evals"
+    cases = [("smplx-intermimic", 18, 8.0), ("smplx-free", 15, 12.0), ("parahome-box", 14, 16.0), ("", 16, 10.0)]
+    for i, (hand, s, pos) in enumerate(cases):
+        d = fake_eval(root / f"e{i}", "ParaHome", method_label("wristmimic", {}, hand), "wristmimic",
+                      "s110_move_kettle", 20, s, pos)  # fmt: skip
+        if hand:  # as the runner writes it for a humanoid with a swapped hand
+            doc = json.loads((d / "summary.json").read_text())
+            doc["scenes"][0]["hand"] = hand
+            (d / "summary.json").write_text(json.dumps(doc))
+    res = build_report([root], tmp_path / "rep")
+    t = pd.read_csv(res.out / "hands.csv")
+    assert t["hand"].tolist() == ["smplx-intermimic", "smplx-free", "parahome-box", "(source hand)"]
+    assert t["method"].unique().tolist() == ["WristMimic (Ours)"] and t["success_pct"].tolist() == [90, 75, 70, 80]
+    assert t["cell"].tolist()[:2] == ["90.0 / 8.0 / 16.0", "75.0 / 12.0 / 24.0"]
+    md = (res.out / "summary.md").read_text()
+    assert "## Hand morphology" in md and "| hand | ParaHome |" in md and "| parahome-box | 70.0 / 16.0 / 32.0 |" in md
+    scene = pd.read_csv(res.out / "per_scene.csv")
+    assert "WristMimic (Ours) [hand smplx-free]" in scene["method"].tolist() and len(scene) == 4
+
+
+def test_no_hands_table_without_swapped_hands(evals: Path, tmp_path: Path) -> None:
+    res = build_report([evals], tmp_path / "rep")
+    assert not (res.out / "hands.csv").exists() and "Hand morphology" not in (res.out / "summary.md").read_text()

@@ -1,4 +1,4 @@
-"""Pipelines: ``wristmimic run pipelines/NAME.toml`` runs convert -> train -> evaluate -> report.
+"""Pipelines: ``wristmimic run pipelines/NAME.toml`` runs convert -> hands -> train -> evaluate -> report.
 
 Each stage is registered in :data:`STAGES` by name; a stage does its work in units (one converted file, one
 trained scene) through :meth:`Context.cached`, which skips a unit whose input fingerprint (content hashes of its
@@ -13,6 +13,9 @@ A pipeline file (paths relative to the current folder)::
     format = "intermimic"                # or "skillmimic-parahome"
     source = "../shared/data/intermimic_omomo"
     output = "datasets/omomo.h5"
+    [hands]                              # optional: one file per hand (pipelines/hands.toml)
+    scene = "sub2_largetable_000"
+    hands = ["smplx-intermimic", "smplx-free", "parahome-box"]
     [train]
     scenes = ["sub2_largetable_000"]     # or "all"
     variant = "wristmimic"
@@ -149,6 +152,45 @@ def convert_stage(ctx: Context, p: dict[str, Any]) -> None:
     ctx.outputs["dataset"] = out
 
 
+@register("hands", {"dataset", "scene", "hands", "output_dir", "palm", "ranges"})
+def hands_stage(ctx: Context, p: dict[str, Any]) -> None:
+    """The hand-morphology study: one file per hand with ``scene`` and that hand swapped onto both wrists
+    (``<output_dir>/<scene>-<hand>.h5``, default ``<work_dir>/hands``); sets ``outputs["datasets"]`` (the files,
+    in ``hands`` order) and ``outputs["scenes"]``. ``hands``: built-in names or MJCF paths (default: every
+    built-in hand); ``palm`` and ``ranges`` apply to MJCF hands / override the range mode."""
+    from wristmimic.humanoid.hands import BUILTIN_HANDS, swap_hands
+
+    dataset = Path(p.get("dataset") or ctx.outputs.get("dataset") or _require(p, "hands", "dataset"))
+    if not dataset.is_file():
+        raise InputError(ctx.spec_path, "hands.dataset", f"file {dataset} not found")
+    scene = str(_require(p, "hands", "scene"))
+    hands = p.get("hands", list(BUILTIN_HANDS))
+    if not isinstance(hands, list) or not hands or not all(isinstance(h, str) for h in hands):
+        raise InputError(ctx.spec_path, "hands.hands", f"{hands!r}", "a non-empty list of hand names or MJCF paths")
+    out_dir = Path(p.get("output_dir", ctx.work_dir / "hands"))
+    sha, files = sha256_file(dataset), []
+    for hand in hands:
+        builtin = hand in BUILTIN_HANDS
+        label = hand if builtin else Path(hand).stem
+        if not builtin and not Path(hand).is_file():
+            raise InputError(ctx.spec_path, "hands.hands", f"{hand!r} is no built-in hand nor a file",
+                             f"one of {', '.join(BUILTIN_HANDS)} or an MJCF path")  # fmt: skip
+        out = out_dir / f"{scene}-{label}{'-' + p['ranges'] if p.get('ranges') else ''}.h5"
+        inputs = {"dataset_sha256": sha, "scene": scene, "hand": hand if builtin else _hash_path(Path(hand))}
+        inputs |= {"palm": p.get("palm", "palm"), "ranges": p.get("ranges"), "code": wristmimic.__version__}
+
+        def work(hand: str = hand, out: Path = out) -> None:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            r = swap_hands(dataset, scene, hand, out, palm=p.get("palm", "palm"), ranges=p.get("ranges"))
+            ctx.echo(f"{out}: hand {r.hand}, {r.num_fingers[1]} finger bodies, wrist deviation "
+                     f"{r.wrist_deviation[0]:.1g} m / {r.wrist_deviation[1]:.1g} rad")  # fmt: skip
+
+        ctx.cached(f"hands {scene} {label}", inputs, [out], work)
+        files.append(out)
+    ctx.outputs["datasets"] = files
+    ctx.outputs["scenes"] = [scene]
+
+
 @register("train", {"dataset", "scenes", "variant", "preset", "seed", "ref_frames", "ppo"})
 def train_stage(ctx: Context, p: dict[str, Any]) -> None:
     """One PPO run per scene in ``<work_dir>/runs/<scene>-<variant>-seed<seed>-<key>``; an interrupted run resumes."""
@@ -156,6 +198,10 @@ def train_stage(ctx: Context, p: dict[str, Any]) -> None:
     from wristmimic.rl.config import preset, to_jsonable
     from wristmimic.rl.train import TrainSpec, resume_run, start_run
 
+    if ctx.outputs.get("datasets") and "dataset" not in p:  # the hands stage's files: train each one's scenes
+        for d in ctx.outputs["datasets"]:
+            train_stage(ctx, {**p, "dataset": str(d)})
+        return
     dataset = Path(p.get("dataset") or ctx.outputs.get("dataset") or _require(p, "train", "dataset"))
     if not dataset.is_file():
         raise InputError(ctx.spec_path, "train.dataset", f"file {dataset} not found")
@@ -182,7 +228,8 @@ def train_stage(ctx: Context, p: dict[str, Any]) -> None:
                 raise KeyboardInterrupt
             ctx.echo(f"{run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
 
-        ctx.cached(f"train {scene}", inputs, [run_dir / "checkpoint.pt"], work)
+        unit = f"train {scene}" + (f" ({dataset.stem})" if ctx.outputs.get("datasets") else "")
+        ctx.cached(unit, inputs, [run_dir / "checkpoint.pt"], work)
         ctx.outputs.setdefault("runs", []).append(run_dir)
 
 

@@ -2,7 +2,8 @@
 
 The humanoid comes from the MJCF stored in the canonical file, re-actuated for MuJoCo: its joint
 ``stiffness``/``damping`` (Isaac Gym PD gains) become position actuators (kp, kv) with the paper's gains per
-body part, joint springs and damping are zeroed, armature 0.02, density 1000, finger ranges as InterMimic, and
+body part, joint springs and damping are zeroed, armature 0.02, density 1000, finger ranges as InterMimic (a
+humanoid with a swapped hand, :mod:`wristmimic.humanoid.hands`, keeps the ranges its MJCF carries), and
 self-collision is off. Each dynamic object is a free body with one mesh geom per coacd hull and the stored
 mass/inertia (from the visual mesh, not the hull sum); static objects (real or inferred supports) are fixed at
 their frame-0 pose. Sensors give everything the environment observes, so a batch of worlds can be stepped by
@@ -183,11 +184,14 @@ def _strip_source_extras(spec: mujoco.MjSpec) -> None:
         spec.delete(g)
 
 
-def _humanoid(spec: mujoco.MjSpec, skel: Skeleton, roles: dict[str, np.ndarray], cfg: SceneConfig) -> np.ndarray:
-    """Re-actuate the humanoid in ``spec``; returns (J*3, 2) gains in hinge order."""
+def _humanoid(
+    spec: mujoco.MjSpec, skel: Skeleton, roles: dict[str, np.ndarray], cfg: SceneConfig, own_ranges: bool = False
+) -> np.ndarray:
+    """Re-actuate the humanoid in ``spec``; returns (J*3, 2) gains in hinge order. Finger ranges are InterMimic's
+    (:func:`finger_ranges`) unless ``own_ranges`` (a swapped hand carries its ranges in the MJCF)."""
     groups = gain_groups(skel, roles)
     gain_of = {b: getattr(cfg.gains, g) for g, bodies in groups.items() for b in bodies}
-    franges = finger_ranges(skel, roles)
+    franges = {} if own_ranges else finger_ranges(skel, roles)
     gains = []
     for j, b in enumerate(skel.joint_bodies):
         body = spec.body(skel.body_names[b])
@@ -274,7 +278,7 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
     _strip_source_extras(spec)
     spec.option.timestep = cfg.timestep
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{cfg.integrator.upper()}")
-    gains = _humanoid(spec, skel, hum.roles, cfg)
+    gains = _humanoid(spec, skel, hum.roles, cfg, own_ranges=bool(hum.hand))
     if cfg.floor:
         spec.worldbody.add_geom(
             name="floor",

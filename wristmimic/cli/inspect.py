@@ -47,6 +47,8 @@ def summarize(ds: Dataset) -> dict[str, Any]:
             "fingers": len(h.roles["fingers"]),
             "key_bodies": len(h.roles["key_bodies"]),
         }
+        if h.hand:
+            out["humanoids"][hid] |= {"hand": h.hand, "hand_source": h.hand_source, "hand_ranges": h.hand_ranges}
     for oid in ds.object_ids:
         o = ds.object(oid)
         out["objects"][oid] = {
@@ -111,6 +113,7 @@ def inspect_cmd(
         typer.echo(
             f"  {hid:<24} {h['family']:<9} bodies {h['bodies']}  joints {h['joints']}  "
             f"fingers {h['fingers']}  key bodies {h['key_bodies']}"
+            + (f"  hand {h['hand']} ({h['hand_ranges']} ranges; {h['hand_source']})" if "hand" in h else "")
         )
     typer.echo(f"\nobjects ({len(info['objects'])})")
     for oid, o in info["objects"].items():

@@ -27,6 +27,7 @@ from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import RewardInputs, compute_reward
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
 from wristmimic.env.torch_math import quat_angle, quat_rotate
+from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
 from wristmimic.sim.backend import PhysicsBackend, make_backend
@@ -113,6 +114,14 @@ class WristMimicEnv:
         fingers, key, non_finger = idx(roles["fingers"]), idx(roles["key_bodies"]), idx(roles["non_finger"])
         self.tracked = torch.cat([key, fingers]) if self.cfg.finger_targets else key
         self.rotated = torch.cat([non_finger, fingers]) if self.cfg.finger_targets else non_finger
+        if self.cfg.finger_targets and scene.humanoid.hand:
+            raise InputError(
+                None,
+                f"variant {self.cfg.variant}",
+                f"needs finger pose targets, but humanoid {scene.humanoid.name} has a swapped hand "
+                f"({scene.humanoid.hand}) whose finger reference is only its rest pose",
+                "a variant without finger targets (wristmimic, decoupled, reward-modulation-only, reset-only)",
+            )
         self.goal_contact = key
         self.all_bodies = torch.arange(scene.skeleton.num_bodies, device=dev)
         self.hands = (idx(roles["left_hand"]), idx(roles["right_hand"]))

@@ -77,14 +77,17 @@ class EvalResult:
     parquet: Path = field(default_factory=Path)
 
 
-def method_label(variant: str, env: dict[str, Any] | None) -> str:
-    """The variant's display name, with the grasp-phase wrist thresholds when they are not the default."""
+def method_label(variant: str, env: dict[str, Any] | None, hand: str = "") -> str:
+    """The variant's display name, with the grasp-phase wrist thresholds when they are not the default and the
+    swapped hand (``[hand NAME]``) when the humanoid carries one."""
     label = METHOD_LABELS.get(variant, variant)
     wrist = (env or {}).get("wrist") or {}
     d = WristThresholds()
     gp, gr = wrist.get("grasp_pos", d.grasp_pos), wrist.get("grasp_rot", d.grasp_rot)
     if (gp, gr) != (d.grasp_pos, d.grasp_rot):
         label += f" [grasp {100 * gp:g} cm / {gr:g} rad]"
+    if hand:
+        label += f" [hand {hand}]"
     return label
 
 
@@ -195,6 +198,8 @@ def summarize(df: pd.DataFrame, info: dict[str, Any]) -> dict[str, Any]:
     lo, hi = wilson_interval(s, n)
     row: dict[str, Any] = {k: info.get(k, "") for k in ("scene", "dataset", "dataset_label", "split", "method")}
     row |= {"variant": info.get("variant", ""), "protocol": info.get("protocol", ""), "noise": info.get("noise", "")}
+    if info.get("hand"):  # only evaluations of a humanoid with a swapped hand (summary.json; csv: in the method)
+        row["hand"] = info["hand"]
     row |= {"trials": n, "successes": s, "success_rate": s / n if n else math.nan}
     row |= {"success_ci_low": lo, "success_ci_high": hi}
     for c in ("obj_pos_err_cm", "obj_rot_err_deg", "wrist_pos_err_cm", "wrist_rot_err_deg", "contact_ratio"):
@@ -235,7 +240,8 @@ def write_summary(out: Path, row: dict[str, Any], settings: dict[str, Any], poli
         frame.to_csv(tmp, index=False, float_format="%.6f", lineterminator="\n")
 
 
-def _check_dataset(meta: dict[str, Any], dataset: Path) -> str:
+def _check_dataset(meta: dict[str, Any], dataset: Path) -> tuple[str, str]:
+    """(source dataset, swapped hand or "") of the run's dataset, after checking it is the one trained on."""
     if not dataset.is_file():
         raise InputError(
             dataset, None, "dataset of the run not found", "the file in the run's config.json (or --dataset)"
@@ -246,8 +252,8 @@ def _check_dataset(meta: dict[str, Any], dataset: Path) -> str:
     from wristmimic.format.reader import open_dataset
 
     with open_dataset(dataset) as ds:
-        ds.sequence(meta["scene"])  # one-line error naming the known ids
-        return str(ds.attrs.get("source_dataset", ""))
+        seq = ds.sequence(meta["scene"])  # one-line error naming the known ids
+        return str(ds.attrs.get("source_dataset", "")), ds.humanoid(seq.humanoid_id).hand
 
 
 def evaluate_policy(
@@ -285,7 +291,7 @@ def evaluate_policy(
         noise=noise or protocol.noise,
     )
     ds_path = Path(dataset or meta["dataset"])
-    source = _check_dataset(meta, ds_path)
+    source, hand = _check_dataset(meta, ds_path)
     sp = find_split(meta["scene"], split)
     env_dict = _env_dict(meta.get("env"))
     expected = _settings_dict(protocol, policy, settings, env_dict, backend)
@@ -347,11 +353,13 @@ def evaluate_policy(
         "dataset": source,
         "dataset_label": sp.label if sp else DATASET_LABELS.get(source, source),
         "split": sp.name if sp else "",
-        "method": method_label(meta.get("variant", ""), env_dict),
+        "method": method_label(meta.get("variant", ""), env_dict, hand),
         "variant": meta.get("variant", ""),
         "protocol": protocol.name,
         "noise": settings.noise,
     }
+    if hand:
+        info["hand"] = hand
     row = summarize(df, info)
     write_summary(out, row, expected | {"trials": n_trials}, meta)
     timing = {

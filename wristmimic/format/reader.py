@@ -229,6 +229,9 @@ class Dataset:
             joint_bodies=g["joint_bodies"][()],
             roles={k: g["roles"][k][()] for k in g["roles"]},
             source_file=_str(g.attrs.get("source_file", "")),
+            hand=_str(g.attrs.get("hand", "")),
+            hand_source=_str(g.attrs.get("hand_source", "")),
+            hand_ranges=_str(g.attrs.get("hand_ranges", "")),
         )
 
     def object(self, oid: str) -> ObjectRecord:

@@ -20,6 +20,12 @@ class HumanoidRecord:
     joint_bodies: np.ndarray  # (J,) int32
     roles: dict[str, np.ndarray]
     source_file: str = ""
+    hand: str = ""
+    """Name of a hand swapped in by ``wristmimic humanoid swap-hands`` (empty: the source's own hands)."""
+    hand_source: str = ""
+    """Where the swapped hand's geometry came from."""
+    hand_ranges: str = ""
+    """Finger range mode of the swapped hand (``intermimic``, ``free``, ``hand``)."""
 
     @property
     def num_bodies(self) -> int:

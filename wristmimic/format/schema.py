@@ -7,7 +7,8 @@ Layout (T frames, B bodies, J = B - 1 joints, O objects of a sequence)::
     /                      attrs: ROOT_ATTRS
     /index/                sequence_ids (N,) str, num_frames (N,) i4, humanoid_ids (N,) str,
                            datasets (N,) str, splits (N,) str
-    /humanoids/<hid>/      attrs: name, family, source_file; mjcf () str; body_names (B,) str;
+    /humanoids/<hid>/      attrs: name, family, source_file (+ hand, hand_source, hand_ranges since 1.1);
+                           mjcf () str; body_names (B,) str;
                            parents (B,) i4; joint_bodies (J,) i4; roles/<role> (n,) i4
     /objects/<oid>/        attrs: name, static, inferred, density, mass, mass_method, watertight,
                            mesh_sha256, source_file, urdf (JSON), surface_seed
@@ -23,7 +24,7 @@ Layout (T frames, B bodies, J = B - 1 joints, O objects of a sequence)::
 from __future__ import annotations
 
 FORMAT_NAME = "wristmimic-reference"
-SCHEMA_VERSION = "1.0.0"
+SCHEMA_VERSION = "1.1.0"
 """Semantic version. Readers reject another MAJOR; a MINOR adds optional content old readers ignore."""
 
 FPS = 30.0

@@ -115,6 +115,8 @@ class DatasetWriter:
     def add_humanoid(self, hid: str, h: HumanoidRecord) -> None:
         g = self.file["humanoids"].create_group(hid)
         g.attrs.update({"name": h.name, "family": h.family, "source_file": h.source_file})
+        if h.hand:  # schema 1.1: only humanoids with a swapped hand carry these
+            g.attrs.update({"hand": h.hand, "hand_source": h.hand_source, "hand_ranges": h.hand_ranges})
         g.create_dataset("mjcf", data=h.mjcf, dtype=_STR)
         g.create_dataset("body_names", data=np.asarray(h.body_names, dtype=object), dtype=_STR)
         g.create_dataset("parents", data=np.asarray(h.parents, dtype=np.int32))

@@ -9,6 +9,7 @@ Output folder::
     coverage.csv               per split and method: scenes listed, evaluated, missing (when splits are known)
     ablation_<dataset>.csv     per method on the scenes every method of that dataset was evaluated on
     terminations.csv           trials per termination reason
+    hands.csv                  per hand, method and dataset (paper Table 4), only when a hand was swapped
     success_per_scene.png, error_distributions.png, termination_reasons.png, training_curves.png (if logs exist)
 """
 
@@ -85,6 +86,9 @@ def build_report(
     abl = T.ablations(t)
     for ds, df in abl.items():
         written[f"ablation_{ds.lower()}.csv"] = df
+    hand_t = T.hands(t)
+    if len(hand_t):
+        written["hands.csv"] = hand_t
     for name, df in written.items():
         T.write_csv(df, out / name)
     res.files += list(written)
@@ -100,7 +104,7 @@ def build_report(
     if runs:
         plots.training_curves(runs, out / "training_curves.png")
         res.files.append("training_curves.png")
-    md = _markdown(title or out.name, t, paper_t, dataset_t, scene_t, abl, ev, bool(runs), cover)
+    md = _markdown(title or out.name, t, paper_t, dataset_t, scene_t, abl, ev, bool(runs), cover, hand_t)
     with atomic_output(out / "summary.md") as tmp:
         tmp.write_text(md)
     res.files.append("summary.md")
@@ -117,6 +121,7 @@ def _markdown(
     ev: T.EvalSet,
     curves: bool,
     cover: pd.DataFrame,
+    hand_t: pd.DataFrame | None = None,
 ) -> str:
     protocol = t["protocol"].iloc[0] if len(t) else ""
     noise = ", ".join(sorted(set(t["noise"]))) if len(t) else ""
@@ -145,6 +150,11 @@ def _markdown(
     if ref:
         lines += ["The paper's Table 1 for the same methods (its 20 + 20 scenes, not necessarily ours):", "",
                   markdown_table(pd.DataFrame(ref)), ""]  # fmt: skip
+    if hand_t is not None and len(hand_t):
+        lines += ["## Hand morphology (success % / object position cm / object rotation deg)", "",
+                  "Each hand was swapped onto the humanoid at the wrists (`wristmimic humanoid swap-hands`) and "
+                  "trained and evaluated on its own, as the paper's Table 4.", "",
+                  markdown_table(T.hands_layout(hand_t)), ""]  # fmt: skip
     if len(cover):
         lines += ["## Coverage of the splits", "", markdown_table(cover), ""]
     cols = ["dataset_label", "method", "scenes", "trials", "success_pct", "success_ci_low_pct", "success_ci_high_pct",

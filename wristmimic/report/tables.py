@@ -23,7 +23,7 @@ from wristmimic.evaluate.runner import DATASET_LABELS, EVAL_FORMAT, METHOD_LABEL
 from wristmimic.safe_io import atomic_output
 
 FLOAT_FORMAT = "%.4f"
-LABEL_COLUMNS = ["dataset_label", "dataset", "split", "method", "variant", "protocol"]
+LABEL_COLUMNS = ["dataset_label", "dataset", "split", "method", "variant", "protocol", "hand"]
 ERROR_COLUMNS = ["obj_pos_err_cm", "obj_rot_err_deg", "wrist_pos_err_cm", "wrist_rot_err_deg", "contact_ratio"]
 RATE_COLUMNS = ["trials", "successes", "success_pct", "success_ci_low_pct", "success_ci_high_pct"]
 PER_SCENE_COLUMNS = [
@@ -38,6 +38,9 @@ PER_SCENE_COLUMNS = [
 ]
 PER_DATASET_COLUMNS = ["dataset_label", "method", "scenes", *RATE_COLUMNS, *ERROR_COLUMNS, "completion_pct"]
 ABLATION_COLUMNS = ["method", "variant", "scenes", *RATE_COLUMNS, "obj_pos_err_cm", "obj_rot_err_deg"]
+HAND_COLUMNS = ["hand", "method", "dataset_label", "scenes", *RATE_COLUMNS, "obj_pos_err_cm", "obj_rot_err_deg", "cell"]
+SOURCE_HAND = "(source hand)"
+"""Hand label of evaluations without a swapped hand, in the hands table."""
 TERMINATION_COLUMNS = ["dataset_label", "method", "scene", "trials", "completed", *TERMINATION_NAMES]
 PAPER_REFERENCE = {
     ("WristMimic (Ours)", "OMOMO"): (98.9, 7.3, 12.2),
@@ -234,6 +237,45 @@ def ablations(t: pd.DataFrame) -> dict[str, pd.DataFrame]:
             rows.append({"method": m, "variant": g["variant"].iloc[0] if len(g) else "", "scenes": len(common), **r})
         out[ds] = pd.DataFrame(rows, columns=ABLATION_COLUMNS)
     return out
+
+
+def hand_order(hands: list[str]) -> list[str]:
+    """Built-in hands in their library order, then the source hand, then other hands by name."""
+    from wristmimic.humanoid.hands import BUILTIN_HANDS
+
+    known = [*BUILTIN_HANDS, SOURCE_HAND]
+    return sorted(set(hands), key=lambda h: (known.index(h) if h in known else len(known), h))
+
+
+def hands(t: pd.DataFrame) -> pd.DataFrame:
+    """The paper's Table 4 (hand morphology) in long form: one row per (hand, method, dataset), trials pooled over
+    scenes, with the ``success / obj pos / obj rot`` cell. Empty when no evaluation has a swapped hand."""
+    if "hand" not in t or not (t["hand"] != "").any():
+        return pd.DataFrame(columns=HAND_COLUMNS)
+    t = t.assign(hand=t["hand"].where(t["hand"] != "", SOURCE_HAND), method=t["variant"].map(METHOD_LABELS))
+    t["method"] = t["method"].fillna(t["variant"])
+    rows = []
+    for (h, m, ds), g in t.groupby(["hand", "method", "dataset_label"], sort=True):
+        r = {"hand": h, "method": m, "dataset_label": ds, "scenes": g["scene"].nunique(), **_rates(g)}
+        r["cell"] = cell(r["success_pct"], r["obj_pos_err_cm"], r["obj_rot_err_deg"])
+        rows.append(r)
+    df = pd.DataFrame(rows, columns=HAND_COLUMNS)
+    order = {h: i for i, h in enumerate(hand_order(df["hand"].tolist()))}
+    df = _sort(df, ["dataset_label", "method"])
+    return df.sort_values("hand", key=lambda c: c.map(order), kind="stable").reset_index(drop=True)
+
+
+def hands_layout(hand_t: pd.DataFrame) -> pd.DataFrame:
+    """Hand x dataset cells as the paper's Table 4 (a method column only when several methods were run)."""
+    labels = dataset_order(hand_t["dataset_label"].tolist())
+    several = hand_t["method"].nunique() > 1
+    rows = []
+    for (h, m), g in hand_t.groupby(["hand", "method"], sort=False):
+        sub = g.set_index("dataset_label")
+        r = {"hand": h, **({"method": m} if several else {})}
+        r |= {ds: sub.loc[ds, "cell"] if ds in sub.index else "-" for ds in labels}
+        rows.append(r)
+    return pd.DataFrame(rows, columns=["hand", *(["method"] if several else []), *labels])
 
 
 def terminations(t: pd.DataFrame) -> pd.DataFrame:
