@@ -137,7 +137,7 @@ def run_job(work: JobWork, dataset: list[Any], run_archive: bytes | None) -> Job
     run_dir = scratch / job.run_dir.name
     threads = torch.get_num_threads()
     notes: list[str] = []
-    trained = False
+    trained, data = False, None
     try:
         _check_code(work)
         data = local_dataset(work.dataset_sha256, dataset)
@@ -160,7 +160,9 @@ def run_job(work: JobWork, dataset: list[Any], run_archive: bytes | None) -> Job
         return JobResult(True, "", pack_run(run_dir), trained, "; ".join(notes), host, _since(t0))
     except BaseException as exc:  # noqa: BLE001 - every failure goes back to the driver, with what was saved
         archive = pack_run(run_dir) if (run_dir / "config.json").is_file() else None
-        return JobResult(False, _one_line(exc), archive, trained, "; ".join(notes), host, _since(t0))
+        error = _one_line(exc).replace(str(run_dir), work.run_dir)
+        error = error.replace(str(data), str(job.spec.dataset)) if data else error  # the paths the user knows
+        return JobResult(False, error, archive, trained, "; ".join(notes), host, _since(t0))
     finally:
         torch.set_num_threads(threads)
         shutil.rmtree(scratch, ignore_errors=True)
@@ -343,7 +345,9 @@ class RayExecutor:
                 if ev:
                     if res.ok:
                         ctx.record(eval_unit(job.run_dir), eval_inputs(job.run_dir, evaluate), [_out(job, protocol)])
-                    ctx.note(eval_unit(job.run_dir), "ran" if res.ok else "failed")
+                    ctx.note(
+                        eval_unit(job.run_dir), "ran" if res.ok else "failed" if res.trained or not train else "skipped"
+                    )
                 done += res.ok
                 if not res.ok:
                     failed.append((job, res.error))
