@@ -19,23 +19,23 @@ def run_cmd(
         metavar="ADDRESS",
         help="Run one train+evaluate job per scene as a Ray task: 'local' starts Ray on this machine; anything "
         "else is a cluster address for ray.init (auto, HOST:PORT, ray://HOST:10001). Needs the ray extra: "
-        "pip install 'wristmimic[ray]'.",
+        "pip install 'wristmimic\\[ray]'.",
     ),
     ray_cpus: int = typer.Option(
         None,
         "--ray-cpus-per-job",
         min=1,
-        help="CPUs each job reserves and uses for physics and torch threads [default: [pipeline] "
-        "ray_cpus_per_job, else --nthread, else 1].",
+        help="CPUs each job reserves and uses for physics and torch threads (default: \\[pipeline] "
+        "ray_cpus_per_job, else --nthread, else 1).",
     ),
     ray_gpus: float = typer.Option(
         None,
         "--ray-gpus-per-job",
         min=0,
-        help="GPUs each job reserves [default: [pipeline] ray_gpus_per_job, else 0].",
+        help="GPUs each job reserves (default: \\[pipeline] ray_gpus_per_job, else 0).",
     ),
     ray_local_cpus: int = typer.Option(
-        None, "--ray-local-cpus", min=1, help="CPUs of the Ray that --ray local starts [default: all cores]."
+        None, "--ray-local-cpus", min=1, help="CPUs of the Ray that --ray local starts (default: all cores)."
     ),
 ) -> None:
     """Run a pipeline's stages in order; a stage whose inputs (content hashes) and outputs are unchanged since
