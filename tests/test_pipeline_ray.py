@@ -17,6 +17,8 @@ from typer.testing import CliRunner
 from wristmimic.cli.main import app
 from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.distributed import RayOptions
+from wristmimic.errors import InputError
 from wristmimic.safe_io import sha256_file
 
 from synthetic import write_intermimic_folder
@@ -190,3 +192,16 @@ def test_ray_is_imported_only_for_ray_runs() -> None:
     code = "import sys, wristmimic.cli.main, wristmimic.pipeline, wristmimic.distributed; print('ray' in sys.modules)"
     r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
     assert r.stdout.strip() == "False"
+
+
+def test_job_resources_come_from_the_options_then_the_pipeline_file_then_nthread() -> None:
+    o = RayOptions("local")
+    assert (o.resolved({}, None).cpus_per_job, o.resolved({}, None).gpus_per_job) == (1, 0)
+    assert o.resolved({}, 3).cpus_per_job == 3
+    assert o.resolved({"ray_cpus_per_job": 2, "ray_gpus_per_job": 0.5}, 3) == RayOptions("local", 2, 0.5)
+    assert RayOptions("local", 4, 1).resolved({"ray_cpus_per_job": 2, "ray_gpus_per_job": 0}, 3) == RayOptions(
+        "local", 4, 1.0
+    )
+    for bad in ({"ray_cpus_per_job": 0}, {"ray_cpus_per_job": "2"}, {"ray_gpus_per_job": -1}):
+        with pytest.raises(InputError, match="pipeline.ray_"):
+            o.resolved(bad, None)

@@ -74,9 +74,9 @@ class RayOptions:
         """Defaults filled from the ``[pipeline]`` table ``meta`` and ``--nthread``; checks that Ray imports."""
         require_ray()
         check_address(self.address)
-        cpus = self.cpus_per_job or meta.get("ray_cpus_per_job") or nthread or 1
+        cpus = next(c for c in (self.cpus_per_job, meta.get("ray_cpus_per_job"), nthread, 1) if c is not None)
         gpus = self.gpus_per_job if self.gpus_per_job is not None else meta.get("ray_gpus_per_job", 0)
-        if not isinstance(cpus, int) or cpus < 1:
+        if not isinstance(cpus, int) or isinstance(cpus, bool) or cpus < 1:
             raise InputError(spec_path, "pipeline.ray_cpus_per_job", f"{cpus!r}", "an integer >= 1")
         if not isinstance(gpus, int | float) or gpus < 0:
             raise InputError(spec_path, "pipeline.ray_gpus_per_job", f"{gpus!r}", "a number >= 0")

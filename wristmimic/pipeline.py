@@ -14,6 +14,7 @@ A pipeline file (paths relative to the current folder)::
 
     [pipeline]
     name = "omomo"                       # work_dir defaults to runs/pipelines/<name>
+    ray_cpus_per_job = 2                 # with --ray: CPUs (and threads) per job; ray_gpus_per_job = 0
     [convert]
     format = "intermimic"                # or "skillmimic-parahome"
     source = "../shared/data/intermimic_omomo"
