@@ -165,11 +165,26 @@ def test_a_failing_job_is_reported_and_the_others_kept(tmp_path: Path, tiny_h5: 
     assert {"train sub1_box_000", f"evaluate {good.name}"} <= set(state) and "train no_such_scene" not in state
     assert not (tmp_path / "report").exists()
 
-    _spec(tmp_path, tiny_h5, scenes=f"{list(SCENES)}".replace("'", '"'))
-    code, out = _run(str(spec), *LOCAL)
+    # the next runs reuse a Ray started here (as a notebook would); the driver leaves it running
+    root = str(REPO)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, runtime_env={"env_vars": {"PYTHONPATH": root}})
+    scenes = f"{list(SCENES)}".replace("'", '"')
+    bad = (
+        spec.read_text()
+        .replace('["sub1_box_000", "no_such_scene"]', scenes)
+        .replace("[report]", 'noise = "bogus"\n[report]')
+    )
+    spec.write_text(bad)
+    code, out = _run(str(spec), *LOCAL)  # sub2 trains, then every evaluation fails on the bad noise mode
+    assert code == 1 and "ray: using the running Ray (2 CPU)" in out and "2 of 2 dispatched job(s) failed" in out
+    assert "--noise: 'bogus'" in out and "train sub2_box_001: ran" in out, out
+    assert ray.is_initialized()
+    spec.write_text(spec.read_text().replace('noise = "bogus"\n', ""))
+    code, out = _run(str(spec), *LOCAL)  # sub1 all up to date; sub2's checkpoint came back: only evaluated
     assert code == 0, out
     assert "ray: 1 job(s) dispatched" in out and "train sub1_box_000: up to date" in out, out
-    assert "3 ran, 2 up to date" in out and (tmp_path / "report" / "summary.md").is_file()
+    assert "train sub2_box_001: up to date" in out and "trained" not in out.split("dispatched")[1], out
+    assert "2 ran, 3 up to date" in out and (tmp_path / "report" / "summary.md").is_file()
 
 
 def test_bad_addresses_and_a_missing_ray_fail_with_one_line(

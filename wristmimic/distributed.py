@@ -366,8 +366,9 @@ class RayExecutor:
         import ray
 
         opts = self.options
-        if ray.is_initialized():
-            return  # a Ray the caller started (e.g. a notebook or test); leave it running
+        if ray.is_initialized():  # a Ray the caller started (e.g. a notebook or a test): use it, leave it running
+            ctx.echo(f"ray: using the running Ray ({ray.cluster_resources().get('CPU', 0):g} CPU)")
+            return
         if opts.address == "local":
             cpus = opts.local_cpus or os.cpu_count() or 1
             if (opts.cpus_per_job or 1) > cpus:
