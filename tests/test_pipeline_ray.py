@@ -220,3 +220,17 @@ def test_job_resources_come_from_the_options_then_the_pipeline_file_then_nthread
     for bad in ({"ray_cpus_per_job": 0}, {"ray_cpus_per_job": "2"}, {"ray_gpus_per_job": -1}):
         with pytest.raises(InputError, match="pipeline.ray_"):
             o.resolved(bad, None)
+
+
+def test_a_node_running_other_code_refuses_the_job(tmp_path: Path, tiny_h5: Path) -> None:
+    """The task body run in-process: a worker whose wristmimic sources differ from the driver's fails at once."""
+    from wristmimic.distributed import JobWork, code_fingerprint, run_job
+    from wristmimic.pipeline import Context, plan_jobs
+
+    (job,) = plan_jobs(
+        Context(tmp_path / "p.toml", tmp_path / "work"), {"dataset": str(tiny_h5), "scenes": [SCENES[0]]}
+    )
+    sha = job.inputs["dataset_sha256"]
+    res = run_job(JobWork(job, str(job.run_dir), sha, True, None, None, 1, "0.1.0+000000000000"), [None], None)
+    assert not res.ok and res.archive is None and not res.trained
+    assert f"runs wristmimic {code_fingerprint()}" in res.error and "install the same code on every node" in res.error

@@ -21,13 +21,15 @@ job writes the same files a serial run does.
 
 Code: ``--ray local`` starts Ray on this machine with ``PYTHONPATH`` set to the driver's package root, so the
 workers import the driver's code. On a cluster, install the same wristmimic (with the ``ray`` extra, and the
-``eval/`` folder of the checkout or ``$WRISTMIMIC_EVAL_DIR``) on every node; a job on a node with another
-version fails, saying so.
+``eval/`` folder of the checkout or ``$WRISTMIMIC_EVAL_DIR``) on every node; a job on a node whose sources
+differ from the driver's (:func:`code_fingerprint`) fails, saying so.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import io
 import os
 import shutil
@@ -104,9 +106,9 @@ class JobWork:
     """The ``[evaluate]`` table, or None: no evaluation."""
     protocol: Protocol | None
     cpus: int
-    version: str
-    package: str | None
-    """The driver's package folder: a worker importing another one fails (local Ray only)."""
+    code: str
+    """The driver's :func:`code_fingerprint`: a worker running other code fails (its results would not be what
+    the cache records say)."""
 
 
 @dataclass
@@ -168,15 +170,23 @@ def run_job(work: JobWork, dataset: list[Any], run_archive: bytes | None) -> Job
         shutil.rmtree(scratch, ignore_errors=True)
 
 
+@functools.cache
+def code_fingerprint() -> str:
+    """``<version>+<sha256 of the package's .py files>`` (12 hex digits) of the imported wristmimic."""
+    root = Path(wristmimic.__file__).resolve().parent
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        h.update(f"{f.relative_to(root).as_posix()}\0".encode() + f.read_bytes())
+    return f"{wristmimic.__version__}+{h.hexdigest()[:12]}"
+
+
 def _check_code(work: JobWork) -> None:
-    if wristmimic.__version__ != work.version:
+    if code_fingerprint() != work.code:
+        where = Path(wristmimic.__file__).resolve().parent
         raise WristmimicError(
-            f"node {socket.gethostname()} has wristmimic {wristmimic.__version__}, the driver {work.version}: "
-            "install the same version on every node"
+            f"node {socket.gethostname()} runs wristmimic {code_fingerprint()} from {where}, the driver "
+            f"{work.code}: install the same code on every node"
         )
-    here = str(Path(wristmimic.__file__).resolve().parent)
-    if work.package is not None and here != work.package:
-        raise WristmimicError(f"the worker imported wristmimic from {here}, the driver from {work.package}")
 
 
 def cache_dir() -> Path:
@@ -305,7 +315,6 @@ class RayExecutor:
             task = ray.remote(run_job)
             resources = {"num_cpus": opts.cpus_per_job, "num_gpus": opts.gpus_per_job, "max_retries": 1}
             refs: dict[str, Any] = {}
-            package = str(Path(wristmimic.__file__).resolve().parent) if opts.address == "local" else None
             for job, train, ev in todo:
                 sha = job.inputs["dataset_sha256"]
                 if sha not in refs:
@@ -318,8 +327,7 @@ class RayExecutor:
                     evaluate=evaluate if ev else None,
                     protocol=protocol if ev else None,
                     cpus=int(opts.cpus_per_job or 1),
-                    version=wristmimic.__version__,
-                    package=package,
+                    code=code_fingerprint(),
                 )
                 archive = pack_run(job.run_dir) if job.run_dir.is_dir() else None
                 ref = task.options(name=f"wristmimic job {job.run_dir.name}", **resources).remote(
