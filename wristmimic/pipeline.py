@@ -72,7 +72,8 @@ class Context:
     outputs: dict[str, Any] = field(default_factory=dict)
     """Values later stages read, e.g. ``outputs["dataset"]`` (the converted file)."""
     summary: list[tuple[str, str]] = field(default_factory=list)
-    """(unit, status) with status ``ran``, ``up to date`` or ``not available yet``."""
+    """(unit, status) with status ``ran``, ``up to date`` or ``not available yet`` (with ``--ray`` also ``failed``
+    or ``skipped``)."""
     echo: Callable[[str], None] = print
     state: dict[str, Any] = field(default_factory=dict)
     spec: dict[str, Any] = field(default_factory=dict)
@@ -107,7 +108,7 @@ class Context:
         self.summary.append((unit, status))
         self.echo(f"{unit}: {status}")
 
-    _note = note
+    _note = note  # the old private name, for stages written against it
 
     def _save_state(self) -> None:
         with atomic_output(self.work_dir / STATE_FILE) as tmp:
