@@ -159,3 +159,30 @@ output = "{tmp_path / "report"}"
     assert "## Hand morphology" in (tmp_path / "report" / "summary.md").read_text()
     again = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
     assert set(_statuses(again).values()) == {"up to date"}
+
+
+def test_jobs_cover_every_dataset_of_a_stage_before_train(tmp_path: Path) -> None:
+    """outputs["datasets"] (e.g. one file per swapped hand) gives one job per (dataset, scene), with distinct
+    cache units and run folders; without it the one dataset keeps today's unit names."""
+    from wristmimic.convert.common import ConvertOptions
+    from wristmimic.convert.intermimic import convert_intermimic
+    from wristmimic.pipeline import Context, plan_jobs
+
+    files = []
+    for name, T in (("left", 30), ("right", 32)):
+        src = write_intermimic_folder(tmp_path / name, ("sub1_box_000", "sub2_box_001"), T=T)
+        out = tmp_path / f"{name}.h5"
+        convert_intermimic(src, out, options=ConvertOptions(hull_cache_dir=tmp_path / "hulls", show_progress=False))
+        files.append(out)
+    ctx = Context(tmp_path / "p.toml", tmp_path / "work", outputs={"datasets": files, "dataset": files[0]})
+    jobs = plan_jobs(ctx, {"scenes": "all", "seed": 2})
+    assert [j.unit for j in jobs] == [
+        f"train {d}/{s}" for d in ("left", "right") for s in ("sub1_box_000", "sub2_box_001")
+    ]
+    assert len({j.run_dir for j in jobs}) == 4 and all(j.spec.seed == 2 and "-seed2-" in j.run_dir.name for j in jobs)
+    assert [j.spec.dataset for j in jobs] == [files[0]] * 2 + [files[1]] * 2
+    one = plan_jobs(
+        Context(tmp_path / "p.toml", tmp_path / "work"),
+        {"dataset": str(files[1]), "scenes": ["sub2_box_001"], "seed": 2},
+    )
+    assert [(j.unit, j.run_dir) for j in one] == [("train sub2_box_001", jobs[3].run_dir)]

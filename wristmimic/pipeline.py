@@ -5,10 +5,16 @@ trained scene) through :meth:`Context.cached`, which skips a unit whose input fi
 input files, its parameters, the code version) and output hashes match the last run. The record lives in
 ``<work_dir>/pipeline_state.json``.
 
+Training and evaluation are planned as per-scene :class:`Job` s (one (dataset, scene) run, then its evaluation).
+By default they run here, stage by stage, as below; with ``wristmimic run --ray ADDRESS`` the train stage hands
+them to :mod:`wristmimic.distributed`, which runs each job (train then evaluate) as a Ray task and records the
+results here; the report is built from the same evaluation folders either way.
+
 A pipeline file (paths relative to the current folder)::
 
     [pipeline]
     name = "omomo"                       # work_dir defaults to runs/pipelines/<name>
+    ray_cpus_per_job = 2                 # with --ray: CPUs (and threads) per job; ray_gpus_per_job = 0
     [convert]
     format = "intermimic"                # or "skillmimic-parahome"
     source = "../shared/data/intermimic_omomo"
@@ -36,13 +42,26 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import wristmimic
 from wristmimic.errors import InputError
 from wristmimic.safe_io import atomic_output, sha256_file
 
+if TYPE_CHECKING:
+    from wristmimic.distributed import RayOptions
+    from wristmimic.evaluate.protocol import Protocol as EvalProtocol
+    from wristmimic.rl.train import TrainResult, TrainSpec
+
 STATE_FILE = "pipeline_state.json"
+
+
+class Executor(Protocol):
+    """Runs the planned jobs elsewhere (:class:`wristmimic.distributed.RayExecutor`): train each job, evaluate it
+    when ``evaluate`` (the ``[evaluate]`` table) is given, record both units in ``ctx`` and set
+    ``ctx.outputs["runs"]``, ``["evals"]``; raises :class:`~wristmimic.errors.WristmimicError` if a job failed."""
+
+    def run(self, ctx: Context, jobs: list[Job], evaluate: dict[str, Any] | None) -> None: ...
 
 
 @dataclass
@@ -56,28 +75,43 @@ class Context:
     outputs: dict[str, Any] = field(default_factory=dict)
     """Values later stages read, e.g. ``outputs["dataset"]`` (the converted file)."""
     summary: list[tuple[str, str]] = field(default_factory=list)
-    """(unit, status) with status ``ran``, ``up to date`` or ``not available yet``."""
+    """(unit, status) with status ``ran``, ``up to date`` or ``not available yet`` (with ``--ray`` also ``failed``
+    or ``skipped``)."""
     echo: Callable[[str], None] = print
     state: dict[str, Any] = field(default_factory=dict)
+    spec: dict[str, Any] = field(default_factory=dict)
+    """The whole pipeline file (tables by stage name)."""
+    executor: Executor | None = None
+    """None: jobs run here, in the train and evaluate stages; else the executor runs them (``--ray``)."""
 
     def cached(self, unit: str, inputs: dict[str, Any], outputs: list[Path], work: Callable[[], None]) -> bool:
         """Run ``work`` unless ``unit`` already ran with the same ``inputs`` and its ``outputs`` are unchanged.
         Returns True when work was done."""
-        key = hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()
-        rec = self.state.get(unit)
-        if rec and rec["key"] == key and rec["outputs"] == {str(o): _hash_path(o) for o in outputs}:
-            self._note(unit, "up to date")
+        if self.up_to_date(unit, inputs, outputs):
+            self.note(unit, "up to date")
             return False
         self.echo(f"{unit}: running")
         work()
-        self.state[unit] = {"key": key, "outputs": {str(o): _hash_path(o) for o in outputs}}
-        self._save_state()
-        self._note(unit, "ran")
+        self.record(unit, inputs, outputs)
+        self.note(unit, "ran")
         return True
 
-    def _note(self, unit: str, status: str) -> None:
+    def up_to_date(self, unit: str, inputs: dict[str, Any], outputs: list[Path]) -> bool:
+        """Whether ``unit`` is recorded with the same ``inputs`` and the current hashes of its ``outputs``."""
+        rec = self.state.get(unit)
+        return bool(rec) and rec["key"] == _inputs_key(inputs) and rec["outputs"] == _output_hashes(outputs)
+
+    def record(self, unit: str, inputs: dict[str, Any], outputs: list[Path]) -> None:
+        """Record that ``unit`` ran with ``inputs`` and made ``outputs`` (saved at once)."""
+        self.state[unit] = {"key": _inputs_key(inputs), "outputs": _output_hashes(outputs)}
+        self._save_state()
+
+    def note(self, unit: str, status: str) -> None:
+        """Add ``(unit, status)`` to the summary and say it."""
         self.summary.append((unit, status))
         self.echo(f"{unit}: {status}")
+
+    _note = note  # the old private name, for stages written against it
 
     def _save_state(self) -> None:
         with atomic_output(self.work_dir / STATE_FILE) as tmp:
@@ -107,6 +141,14 @@ def register(name: str, keys: set[str], note: str = "") -> Callable:
         return fn
 
     return deco
+
+
+def _inputs_key(inputs: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _output_hashes(outputs: list[Path]) -> dict[str, str | None]:
+    return {str(o): _hash_path(o) for o in outputs}
 
 
 def _hash_path(p: Path) -> str | None:
@@ -191,81 +233,153 @@ def hands_stage(ctx: Context, p: dict[str, Any]) -> None:
     ctx.outputs["scenes"] = [scene]
 
 
-@register("train", {"dataset", "scenes", "variant", "preset", "seed", "ref_frames", "ppo"})
-def train_stage(ctx: Context, p: dict[str, Any]) -> None:
-    """One PPO run per scene in ``<work_dir>/runs/<scene>-<variant>-seed<seed>-<key>``; an interrupted run resumes."""
+@dataclass
+class Job:
+    """One (dataset, scene): train a run into ``run_dir``, then evaluate it (``run_dir/eval/<protocol>``)."""
+
+    spec: TrainSpec
+    run_dir: Path
+    """``<work_dir>/runs/<scene>-<variant>-seed<seed>-<key>``; ``key`` hashes the cache inputs."""
+    unit: str
+    """Cache unit of the training: ``train <scene>`` (``train <dataset stem>/<scene>`` for several datasets)."""
+    inputs: dict[str, Any]
+    """Cache inputs of the training: dataset sha256, scene, variant, seed, PPO config, code version."""
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.run_dir / "checkpoint.pt"
+
+
+def plan_jobs(ctx: Context, p: dict[str, Any]) -> list[Job]:
+    """The jobs of the ``[train]`` table: its ``scenes`` (or all) of every dataset, in order.
+
+    Datasets: ``outputs["datasets"]`` (set by a stage before train) when present, else ``[train].dataset`` or
+    the converted ``outputs["dataset"]``."""
     from wristmimic.format.reader import open_dataset
     from wristmimic.rl.config import preset, to_jsonable
-    from wristmimic.rl.train import TrainSpec, resume_run, start_run
+    from wristmimic.rl.train import TrainSpec
 
-    if ctx.outputs.get("datasets") and "dataset" not in p:  # the hands stage's files: train each one's scenes
-        for d in ctx.outputs["datasets"]:
-            train_stage(ctx, {**p, "dataset": str(d)})
-        return
-    dataset = Path(p.get("dataset") or ctx.outputs.get("dataset") or _require(p, "train", "dataset"))
-    if not dataset.is_file():
-        raise InputError(ctx.spec_path, "train.dataset", f"file {dataset} not found")
-    scenes = p.get("scenes", "all")
-    if scenes == "all":
-        with open_dataset(dataset) as ds:
-            scenes = list(ds.sequence_ids)
+    if ctx.outputs.get("datasets"):
+        datasets = [Path(d) for d in ctx.outputs["datasets"]]
+    else:
+        datasets = [Path(p.get("dataset") or ctx.outputs.get("dataset") or _require(p, "train", "dataset"))]
     variant, seed, name = p.get("variant", "wristmimic"), int(p.get("seed", 0)), p.get("preset", "cpu")
     ppo = preset(name, **p.get("ppo", {}))
-    sha = sha256_file(dataset)
-    for scene in scenes:
-        spec = TrainSpec(dataset, scene, variant, seed, name, ppo, ref_frames=p.get("ref_frames"))
-        inputs = {"dataset_sha256": sha, "scene": scene, "variant": variant, "seed": seed}
-        inputs |= {"ppo": to_jsonable(ppo), "ref_frames": spec.ref_frames, "code": wristmimic.__version__}
-        key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:8]
-        run_dir = ctx.work_dir / "runs" / f"{scene}-{variant}-seed{seed}-{key}"
+    jobs = []
+    for dataset in datasets:
+        if not dataset.is_file():
+            raise InputError(ctx.spec_path, "train.dataset", f"file {dataset} not found")
+        scenes = p.get("scenes", "all")
+        if scenes == "all":
+            with open_dataset(dataset) as ds:
+                scenes = list(ds.sequence_ids)
+        sha = sha256_file(dataset)
+        for scene in scenes:
+            spec = TrainSpec(dataset, scene, variant, seed, name, ppo, ref_frames=p.get("ref_frames"))
+            inputs = {"dataset_sha256": sha, "scene": scene, "variant": variant, "seed": seed}
+            inputs |= {"ppo": to_jsonable(ppo), "ref_frames": spec.ref_frames, "code": wristmimic.__version__}
+            key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:8]
+            run_dir = ctx.work_dir / "runs" / f"{scene}-{variant}-seed{seed}-{key}"
+            unit = f"train {scene}" if len(datasets) == 1 else f"train {dataset.stem}/{scene}"
+            jobs.append(Job(spec, run_dir, unit, inputs))
+    return jobs
 
-        def work(spec: TrainSpec = spec, run_dir: Path = run_dir) -> None:
-            kw = {"nthread": ctx.nthread, "progress": ctx.progress}
-            go = resume_run if (run_dir / "checkpoint.pt").exists() else start_run
-            r = go(run_dir, **kw) if go is resume_run else start_run(spec, run_dir, **kw)
+
+def train_job(
+    spec: TrainSpec, run_dir: Path, nthread: int | None, progress: bool, dataset_file: Path | None = None
+) -> TrainResult:
+    """Start the run in ``run_dir``, or resume it from its checkpoint."""
+    from wristmimic.rl.train import resume_run, start_run
+
+    kw: dict[str, Any] = {"nthread": nthread, "progress": progress, "dataset_file": dataset_file}
+    if (Path(run_dir) / "checkpoint.pt").exists():
+        return resume_run(run_dir, **kw)
+    return start_run(spec, run_dir, **kw)
+
+
+def evaluate_job(
+    run_dir: Path,
+    protocol: EvalProtocol,
+    p: dict[str, Any],
+    nthread: int | None,
+    progress: bool,
+    dataset_file: Path | None = None,
+    recorded_run_dir: Path | None = None,
+) -> Path:
+    """Evaluate the run in ``run_dir`` under ``protocol`` with the ``[evaluate]`` table ``p``; returns
+    ``run_dir/eval/<protocol>``. ``recorded_run_dir``: the run's path to record (when evaluated in a copy)."""
+    from wristmimic.evaluate.policy import load_eval_policy
+    from wristmimic.evaluate.runner import evaluate_policy
+
+    out = Path(run_dir) / "eval" / protocol.name
+    policy = load_eval_policy(run_dir)
+    if recorded_run_dir is not None:
+        rec = Path(recorded_run_dir)
+        policy.metadata |= {"run_dir": str(rec), "checkpoint": str(rec / "checkpoint.pt")}
+    evaluate_policy(
+        policy,
+        protocol,
+        out,
+        trials=p.get("trials"),
+        noise=p.get("noise"),
+        seed=p.get("seed"),
+        num_envs=int(p.get("num_envs", 256)),
+        nthread=nthread,
+        dataset=dataset_file,
+        progress=progress,
+    )
+    return out
+
+
+def eval_unit(run_dir: Path) -> str:
+    return f"evaluate {Path(run_dir).name}"
+
+
+def eval_inputs(run_dir: Path, p: dict[str, Any]) -> dict[str, Any]:
+    """Cache inputs of a run's evaluation: its checkpoint's hash, the ``[evaluate]`` table, the code version."""
+    return {"checkpoint": _hash_path(Path(run_dir) / "checkpoint.pt"), "params": p, "code": wristmimic.__version__}
+
+
+@register("train", {"dataset", "scenes", "variant", "preset", "seed", "ref_frames", "ppo"})
+def train_stage(ctx: Context, p: dict[str, Any]) -> None:
+    """One PPO run per job (dataset, scene) in ``<work_dir>/runs/<scene>-<variant>-seed<seed>-<key>``; an
+    interrupted run resumes. With an executor (``--ray``) each job also runs its evaluation there."""
+    jobs = plan_jobs(ctx, p)
+    ctx.outputs["jobs"] = jobs
+    if ctx.executor is not None:
+        ctx.executor.run(ctx, jobs, ctx.spec.get("evaluate"))
+        return
+    for job in jobs:
+
+        def work(job: Job = job) -> None:
+            r = train_job(job.spec, job.run_dir, ctx.nthread, ctx.progress)
             if r.status == "interrupted":
-                ctx.echo(f"{run_dir}: interrupted, checkpoint saved; run the pipeline again to resume")
+                ctx.echo(f"{job.run_dir}: interrupted, checkpoint saved; run the pipeline again to resume")
                 raise KeyboardInterrupt
-            ctx.echo(f"{run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
+            ctx.echo(f"{job.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
 
-        unit = f"train {scene}" + (f" ({dataset.stem})" if ctx.outputs.get("datasets") else "")
-        ctx.cached(unit, inputs, [run_dir / "checkpoint.pt"], work)
-        ctx.outputs.setdefault("runs", []).append(run_dir)
+        ctx.cached(job.unit, job.inputs, [job.checkpoint], work)
+        ctx.outputs.setdefault("runs", []).append(job.run_dir)
 
 
 @register("evaluate", {"protocol", "trials", "noise", "seed", "num_envs"})
 def evaluate_stage(ctx: Context, p: dict[str, Any]) -> None:
     """Evaluate every trained run (``outputs["runs"]``) under a protocol into ``<run>/eval/<protocol>``."""
-    from wristmimic.evaluate.policy import load_eval_policy
     from wristmimic.evaluate.protocol import load_protocol
-    from wristmimic.evaluate.runner import evaluate_policy
 
+    if ctx.outputs.get("jobs_evaluated"):
+        return  # the executor evaluated each job after training it
     protocol = load_protocol(p.get("protocol", "paper"))
     runs = ctx.outputs.get("runs") or []
     if not runs:
         raise InputError(ctx.spec_path, "[evaluate]", "no trained run to evaluate", "a [train] stage before it")
     for run_dir in runs:
         out = Path(run_dir) / "eval" / protocol.name
-        inputs = {
-            "checkpoint": _hash_path(Path(run_dir) / "checkpoint.pt"),
-            "params": p,
-            "code": wristmimic.__version__,
-        }
 
-        def work(run_dir: Path = Path(run_dir), out: Path = out) -> None:
-            evaluate_policy(
-                load_eval_policy(run_dir),
-                protocol,
-                out,
-                trials=p.get("trials"),
-                noise=p.get("noise"),
-                seed=p.get("seed"),
-                num_envs=int(p.get("num_envs", 256)),
-                nthread=ctx.nthread,
-                progress=ctx.progress,
-            )
+        def work(run_dir: Path = Path(run_dir)) -> None:
+            evaluate_job(run_dir, protocol, p, ctx.nthread, ctx.progress)
 
-        ctx.cached(f"evaluate {Path(run_dir).name}", inputs, [out], work)
+        ctx.cached(eval_unit(run_dir), eval_inputs(run_dir, p), [out], work)
         ctx.outputs.setdefault("evals", []).append(out)
 
 
@@ -312,21 +426,32 @@ def load_spec(path: Path) -> dict[str, Any]:
 
 
 def run_pipeline(
-    path: Path, progress: bool = True, nthread: int | None = None, echo: Callable[[str], None] = print
+    path: Path,
+    progress: bool = True,
+    nthread: int | None = None,
+    echo: Callable[[str], None] = print,
+    ray: RayOptions | None = None,
 ) -> Context:
-    """Run every stage named in the pipeline file, in registry order; returns the context with the summary."""
+    """Run every stage named in the pipeline file, in registry order; returns the context with the summary.
+
+    ``ray``: run the train/evaluate jobs as Ray tasks (:mod:`wristmimic.distributed`); None: here, in order."""
     spec = load_spec(path)
     meta = spec.get("pipeline", {})
+    executor = None
+    if ray is not None:
+        from wristmimic.distributed import RayExecutor
+
+        executor = RayExecutor(ray.resolved(meta, nthread, Path(path)))
     work_dir = Path(meta.get("work_dir", Path("runs") / "pipelines" / meta.get("name", Path(path).stem)))
     work_dir.mkdir(parents=True, exist_ok=True)
     state_file = work_dir / STATE_FILE
     state = json.loads(state_file.read_text()) if state_file.exists() else {}
-    ctx = Context(Path(path), work_dir, progress, nthread, echo=echo, state=state)
+    ctx = Context(Path(path), work_dir, progress, nthread, echo=echo, state=state, spec=spec, executor=executor)
     for name, stage in STAGES.items():
         if name not in spec:
             continue
         if stage.run is None:
-            ctx._note(name, "not available yet")
+            ctx.note(name, "not available yet")
             echo(f"  ({stage.note}; skipped)")
             continue
         stage.run(ctx, spec[name])

@@ -102,13 +102,13 @@ def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any
     }
 
 
-def _build(config: dict[str, Any], run_dir: Path, nthread: int | None) -> Runner:
+def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_file: Path | None = None) -> Runner:
     ppo = from_jsonable(PPOConfig, config["ppo"])
     env_cfg = from_jsonable(EnvConfig, config["env"])
     physics = config.get("physics") or {"backend": "cpu"}  # runs from before backends existed: CPU
     options = {"device": physics["device"]} if physics["backend"] == "warp" and physics.get("device") else None
     env = WristMimicEnv.from_file(
-        config["dataset"]["path"],
+        dataset_file or config["dataset"]["path"],
         config["scene"],
         num_worlds=ppo.num_envs,
         config=env_cfg,
@@ -133,22 +133,32 @@ def _check_scene(dataset: Path, scene: str) -> None:
         ds.sequence(scene)  # InputError naming the known ids
 
 
-def start_run(spec: TrainSpec, run_dir: Path, nthread: int | None = None, progress: bool = True) -> TrainResult:
-    """Create ``run_dir`` (must not hold a run yet), write ``config.json`` and train to ``spec.ppo.max_frames``."""
+def start_run(
+    spec: TrainSpec,
+    run_dir: Path,
+    nthread: int | None = None,
+    progress: bool = True,
+    dataset_file: Path | None = None,
+) -> TrainResult:
+    """Create ``run_dir`` (must not hold a run yet), write ``config.json`` and train to ``spec.ppo.max_frames``.
+
+    ``dataset_file``: read the data from this copy of ``spec.dataset`` (e.g. a Ray worker's local copy);
+    ``config.json`` still records ``spec.dataset`` and the sha256 of the bytes read."""
     run_dir = Path(run_dir)
+    data = Path(dataset_file or spec.dataset)
     if (run_dir / "config.json").exists():
         raise InputError(run_dir, None, "already holds a run", "a new folder (or use --resume)")
-    _check_scene(Path(spec.dataset), spec.scene)
+    _check_scene(data, spec.scene)
     if spec.variant not in VARIANTS:
         raise InputError(None, "variant", f"unknown variant {spec.variant!r}", f"one of {', '.join(VARIANTS)}")
     if spec.backend not in BACKENDS:
         raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
     env_cfg = spec.env or variant_config(spec.variant)
-    config = _config_dict(spec, env_cfg, sha256_file(spec.dataset))
+    config = _config_dict(spec, env_cfg, sha256_file(data))
     run_dir.mkdir(parents=True, exist_ok=True)
     with atomic_output(run_dir / "config.json") as tmp:
         tmp.write_text(dumps(config) + "\n")
-    runner = _build(config, run_dir, nthread)
+    runner = _build(config, run_dir, nthread, data)
     try:
         status = runner.learn(spec.ppo.max_frames, progress)
     finally:
@@ -157,18 +167,24 @@ def start_run(spec: TrainSpec, run_dir: Path, nthread: int | None = None, progre
 
 
 def resume_run(
-    run_dir: Path, max_frames: int | None = None, nthread: int | None = None, progress: bool = True
+    run_dir: Path,
+    max_frames: int | None = None,
+    nthread: int | None = None,
+    progress: bool = True,
+    dataset_file: Path | None = None,
 ) -> TrainResult:
-    """Continue a run from its ``checkpoint.pt`` exactly where it stopped (to ``max_frames`` if given)."""
+    """Continue a run from its ``checkpoint.pt`` exactly where it stopped (to ``max_frames`` if given).
+
+    ``dataset_file``: read the data from this copy of the recorded dataset (its sha256 must match)."""
     run_dir = Path(run_dir)
     state = load_checkpoint(run_dir)
     config = json.loads(state["config"])
-    dataset = Path(config["dataset"]["path"])
+    dataset = Path(dataset_file or config["dataset"]["path"])
     if not dataset.is_file():
         raise InputError(dataset, None, "dataset of the run not found", "the file recorded in config.json")
     if sha256_file(dataset) != config["dataset"]["sha256"]:
         raise InputError(dataset, None, "changed since the run started (sha256 differs)", "the same file")
-    runner = _build(config, run_dir, nthread)
+    runner = _build(config, run_dir, nthread, dataset)
     try:
         runner.load_state_dict(state)
         budget = max_frames if max_frames is not None else config["ppo"]["max_frames"]
