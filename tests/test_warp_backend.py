@@ -161,3 +161,47 @@ def test_train_resume_and_evaluate_commands_on_the_warp_backend(synthetic: tuple
     assert summary["settings"]["backend"] == "warp" and summary["scenes"][0]["trials"] == 5
     bad = cli.invoke(app, ["evaluate", str(run), "-p", "quick", "-n", "5", "--backend", "gpu"])
     assert bad.exit_code == 1 and "--backend" in bad.output and "one of cpu, warp" in bad.output
+
+
+def test_pipeline_trains_and_evaluates_on_the_warp_backend(synthetic: tuple[Path, str], tmp_path: Path) -> None:
+    """``backend``/``device`` in the [train] and [evaluate] tables reach the run and its evaluation; an unknown
+    backend is a one-line error naming the key."""
+    import json
+
+    from wristmimic.errors import InputError
+    from wristmimic.pipeline import run_pipeline
+
+    dataset, sid = synthetic
+    spec = tmp_path / "warp.toml"
+    body = f"""
+[pipeline]
+work_dir = "{tmp_path / "work"}"
+[train]
+dataset = "{dataset}"
+scenes = ["{sid}"]
+ref_frames = 12
+backend = "BACKEND"
+device = "cpu"
+[train.ppo]
+num_envs = 2
+horizon = 4
+minibatch_size = 8
+epochs = 1
+actor_hidden = [16]
+critic_hidden = [16]
+max_frames = 8
+[evaluate]
+protocol = "quick"
+trials = 2
+num_envs = 2
+backend = "warp"
+device = "cpu"
+"""
+    spec.write_text(body.replace("BACKEND", "warp"))
+    ctx = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    (run,) = ctx.outputs["runs"]
+    assert json.loads((run / "config.json").read_text())["physics"] == {"backend": "warp", "device": "cpu"}
+    assert json.loads((run / "eval" / "quick" / "summary.json").read_text())["settings"]["backend"] == "warp"
+    spec.write_text(body.replace("BACKEND", "gpu"))
+    with pytest.raises(InputError, match="train.backend"):
+        run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)

@@ -27,10 +27,12 @@ A pipeline file (paths relative to the current folder)::
     variant = "wristmimic"
     preset = "cpu"
     seed = 0
+    backend = "cpu"                      # or "warp" (MuJoCo Warp; device = "cuda" by default)
     [train.ppo]                          # optional overrides of the preset
     max_frames = 5_000_000
     [evaluate]
     protocol = "paper"                   # eval/protocols/<name>.toml; trials = ... overrides
+    backend = "cpu"                      # or "warp", as [train]
     [report]                             # output = "reports/omomo" (default <work_dir>/report)
 """
 
@@ -258,6 +260,7 @@ def plan_jobs(ctx: Context, p: dict[str, Any]) -> list[Job]:
     from wristmimic.format.reader import open_dataset
     from wristmimic.rl.config import preset, to_jsonable
     from wristmimic.rl.train import TrainSpec
+    from wristmimic.sim.backend import BACKENDS
 
     if ctx.outputs.get("datasets"):
         datasets = [Path(d) for d in ctx.outputs["datasets"]]
@@ -265,6 +268,9 @@ def plan_jobs(ctx: Context, p: dict[str, Any]) -> list[Job]:
         datasets = [Path(p.get("dataset") or ctx.outputs.get("dataset") or _require(p, "train", "dataset"))]
     variant, seed, name = p.get("variant", "wristmimic"), int(p.get("seed", 0)), p.get("preset", "cpu")
     ppo = preset(name, **p.get("ppo", {}))
+    backend = p.get("backend", "cpu")
+    if backend not in BACKENDS:
+        raise InputError(ctx.spec_path, "train.backend", f"{backend!r}", f"one of {', '.join(BACKENDS)}")
     jobs = []
     for dataset in datasets:
         if not dataset.is_file():
@@ -276,8 +282,11 @@ def plan_jobs(ctx: Context, p: dict[str, Any]) -> list[Job]:
         sha = sha256_file(dataset)
         for scene in scenes:
             spec = TrainSpec(dataset, scene, variant, seed, name, ppo, ref_frames=p.get("ref_frames"))
+            spec.backend, spec.device = backend, p.get("device")
             inputs = {"dataset_sha256": sha, "scene": scene, "variant": variant, "seed": seed}
             inputs |= {"ppo": to_jsonable(ppo), "ref_frames": spec.ref_frames, "code": wristmimic.__version__}
+            if backend != "cpu":  # CPU runs keep the keys (and run folders) they had before backends existed
+                inputs |= {"physics": {"backend": backend, "device": p.get("device")}}
             key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:8]
             run_dir = ctx.work_dir / "runs" / f"{scene}-{variant}-seed{seed}-{key}"
             unit = f"train {scene}" if len(datasets) == 1 else f"train {dataset.stem}/{scene}"
@@ -327,6 +336,8 @@ def evaluate_job(
         nthread=nthread,
         dataset=dataset_file,
         progress=progress,
+        backend=p.get("backend", "cpu"),
+        backend_options={"device": p["device"]} if p.get("device") else None,
     )
     return out
 
@@ -340,7 +351,7 @@ def eval_inputs(run_dir: Path, p: dict[str, Any]) -> dict[str, Any]:
     return {"checkpoint": _hash_path(Path(run_dir) / "checkpoint.pt"), "params": p, "code": wristmimic.__version__}
 
 
-@register("train", {"dataset", "scenes", "variant", "preset", "seed", "ref_frames", "ppo"})
+@register("train", {"dataset", "scenes", "variant", "preset", "seed", "ref_frames", "ppo", "backend", "device"})
 def train_stage(ctx: Context, p: dict[str, Any]) -> None:
     """One PPO run per job (dataset, scene) in ``<work_dir>/runs/<scene>-<variant>-seed<seed>-<key>``; an
     interrupted run resumes. With an executor (``--ray``) each job also runs its evaluation there."""
@@ -362,7 +373,7 @@ def train_stage(ctx: Context, p: dict[str, Any]) -> None:
         ctx.outputs.setdefault("runs", []).append(job.run_dir)
 
 
-@register("evaluate", {"protocol", "trials", "noise", "seed", "num_envs"})
+@register("evaluate", {"protocol", "trials", "noise", "seed", "num_envs", "backend", "device"})
 def evaluate_stage(ctx: Context, p: dict[str, Any]) -> None:
     """Evaluate every trained run (``outputs["runs"]``) under a protocol into ``<run>/eval/<protocol>``."""
     from wristmimic.evaluate.protocol import load_protocol
