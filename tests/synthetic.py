@@ -226,3 +226,11 @@ def write_parahome_folder(root: Path, clips: dict[str, int] | None = None, T: in
     for obj in ("box", "cup", "kettle"):
         write_box_object(root / "objects", obj, extents=(0.15, 0.12, 0.1), layout="skillmimic")
     return root
+
+
+def tiny_ppo_toml(max_frames: int) -> str:
+    """A pipeline's ``[train.ppo]`` table for a few-second training run (2 worlds, horizon 4, 16-unit MLPs)."""
+    return (
+        "[train.ppo]\nnum_envs = 2\nhorizon = 4\nminibatch_size = 8\nepochs = 1\n"
+        f"actor_hidden = [16]\ncritic_hidden = [16]\nmax_frames = {max_frames}"
+    )

@@ -13,7 +13,7 @@ from wristmimic.cli.main import app
 from wristmimic.errors import InputError
 from wristmimic.pipeline import STAGES, load_spec, run_pipeline
 
-from synthetic import write_intermimic_folder
+from synthetic import tiny_ppo_toml, write_intermimic_folder
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,14 +36,7 @@ hull_cache = "{tmp / "hulls"}"
 [train]
 scenes = "all"
 seed = {seed}
-[train.ppo]
-num_envs = 2
-horizon = 4
-minibatch_size = 8
-epochs = 1
-actor_hidden = [16]
-critic_hidden = [16]
-max_frames = 16
+{tiny_ppo_toml(16)}
 {extra}
 """
     )
@@ -132,14 +125,7 @@ scene = "synth_default"
 hands = ["smplx-intermimic", "parahome-box"]
 [train]
 ref_frames = 12
-[train.ppo]
-num_envs = 2
-horizon = 4
-minibatch_size = 8
-epochs = 1
-actor_hidden = [16]
-critic_hidden = [16]
-max_frames = 16
+{tiny_ppo_toml(16)}
 [evaluate]
 protocol = "quick"
 trials = 2

@@ -21,7 +21,7 @@ from wristmimic.distributed import RayOptions
 from wristmimic.errors import InputError
 from wristmimic.safe_io import sha256_file
 
-from synthetic import write_intermimic_folder
+from synthetic import tiny_ppo_toml, write_intermimic_folder
 
 ray = pytest.importorskip("ray")
 REPO = Path(__file__).resolve().parents[1]
@@ -59,14 +59,7 @@ work_dir = "{tmp / "work"}"
 dataset = "{h5}"
 scenes = {scenes}
 seed = 3
-[train.ppo]
-num_envs = 2
-horizon = 4
-minibatch_size = 8
-epochs = 1
-actor_hidden = [16]
-critic_hidden = [16]
-max_frames = 64
+{tiny_ppo_toml(64)}
 [evaluate]
 protocol = "quick"
 trials = 4

@@ -20,7 +20,7 @@ from wristmimic.convert.common import ConvertOptions  # noqa: E402
 from wristmimic.convert.intermimic import convert_intermimic  # noqa: E402
 from wristmimic.env.vec_env import WristMimicEnv  # noqa: E402
 
-from synthetic import write_intermimic_folder  # noqa: E402
+from synthetic import tiny_ppo_toml, write_intermimic_folder  # noqa: E402
 
 HORIZON = 6
 POS_TOL_M = 1e-3  # body and object positions
@@ -182,14 +182,7 @@ scenes = ["{sid}"]
 ref_frames = 12
 backend = "BACKEND"
 device = "cpu"
-[train.ppo]
-num_envs = 2
-horizon = 4
-minibatch_size = 8
-epochs = 1
-actor_hidden = [16]
-critic_hidden = [16]
-max_frames = 8
+{tiny_ppo_toml(8)}
 [evaluate]
 protocol = "quick"
 trials = 2
