@@ -3,8 +3,9 @@
 The scene's ``MjModel`` is compiled for ``mujoco_warp`` once; the state of every world lives in Warp arrays
 and is exposed to the environment as torch tensors that share the memory (``wp.to_torch``), so observation,
 reward and termination math runs on the same device with no copies to the host. On CUDA the substep loop is
-captured once as a CUDA graph and Warp launches on torch's current stream, so torch and Warp work is ordered
-without synchronising the host.
+captured once as a CUDA graph on Warp's own stream (capture is not allowed on the legacy default stream torch
+uses), and the two streams wait on each other through events, so torch and Warp work is ordered without
+synchronising the host.
 
 Semantics match :class:`wristmimic.sim.backend.CpuRolloutBackend`: sensors after :meth:`step` are those of the
 last physics step's start (``step`` evaluates sensors before integrating); :meth:`reset` evaluates sensors of
@@ -84,7 +85,6 @@ class WarpBackend:
         self.nconmax, self.njmax = int(nconmax or auto_con), int(njmax or auto_j)
         self.physics_seconds = 0.0
         with wp.ScopedDevice(self._wpdev):
-            self._stream = None if self._wpdev.is_cpu else wp.stream_from_torch(torch.cuda.current_stream(self.device))
             self.m = mjw.put_model(model)
             d0 = mujoco.MjData(model)
             mujoco.mj_forward(model, d0)
@@ -150,12 +150,15 @@ class WarpBackend:
         fn = mjw.step if what == "step" else mjw.forward
         t0 = time.perf_counter()
         with wp.ScopedDevice(self._wpdev):
-            if self._stream is not None:
-                with wp.ScopedStream(self._stream):
-                    self._run_graph(fn, what, n)
-            else:
+            if self._wpdev.is_cpu:
                 for _ in range(n):
                     fn(self.m, self.d)
+            else:
+                warp_stream = wp.get_stream(self._wpdev)
+                torch_stream = wp.stream_from_torch(torch.cuda.current_stream(self.device))
+                warp_stream.wait_stream(torch_stream)  # the inputs torch wrote (controls, reset states)
+                self._run_graph(fn, what, n)
+                torch_stream.wait_stream(warp_stream)  # torch reads the new state after the step
         self.physics_seconds += time.perf_counter() - t0
 
     def _run_graph(self, fn: Any, what: str, n: int) -> None:
