@@ -34,6 +34,7 @@ class EpisodeStats:
         self.num_frames = int(num_frames)
         self.episodes_total = 0
         self.successes_total = 0
+        self._codes: torch.Tensor | None = None
         self._reset_iteration()
 
     def _reset_iteration(self) -> None:
@@ -48,7 +49,9 @@ class EpisodeStats:
         done = terminated | info["time_outs"]
         success = info["time_outs"] & (info["frame"] >= self.num_frames - 1)
         terms = {k: v for k, v in info["terms"].items() if k.startswith("reward/")}
-        codes = torch.tensor(_REASON_CODES, device=reward.device)
+        if self._codes is None or self._codes.device != reward.device:  # made once: no host-to-device copy per step
+            self._codes = torch.tensor(_REASON_CODES, device=reward.device)
+        codes = self._codes
         by_reason = ((info["termination_reason"][:, None] == codes[None]) & terminated[:, None]).sum(0)
         values = [
             reward.double().mean(),
