@@ -227,3 +227,42 @@ def test_a_node_running_other_code_refuses_the_job(tmp_path: Path, tiny_h5: Path
     res = run_job(JobWork(job, str(job.run_dir), sha, True, None, None, 1, "0.1.0+000000000000"), [None], None)
     assert not res.ok and res.archive is None and not res.trained
     assert f"runs wristmimic {code_fingerprint()}" in res.error and "install the same code on every node" in res.error
+
+
+def test_ctrl_c_stops_jobs_keeping_their_checkpoints_and_a_rerun_resumes(tmp_path: Path, tiny_h5: Path) -> None:
+    """Ctrl-C on the driver (SIGINT just after dispatch): the job stops after a training iteration, the driver
+    brings back its checkpoint and exits with KeyboardInterrupt; running again resumes it to the end."""
+    import os
+    import signal
+    import threading
+
+    from wristmimic.pipeline import run_pipeline
+
+    spec = _spec(tmp_path, tiny_h5, scenes='["sub1_box_000"]')
+    spec.write_text(spec.read_text().replace("max_frames = 64", "max_frames = 400"))  # 50 iterations
+    lines: list[str] = []
+
+    def echo(line: str) -> None:
+        lines.append(line)
+        if "job(s) dispatched" in line:  # Ctrl-C while the driver waits (workers are still starting)
+            threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()
+
+    options = RayOptions("local", 1, 0, 2)
+    with pytest.raises(KeyboardInterrupt):
+        run_pipeline(spec, progress=False, nthread=1, echo=echo, ray=options)
+    assert any("Ctrl-C: every job stops" in s for s in lines), lines
+    assert any("stopped: stopped at iteration" in s for s in lines), lines
+    (run,) = (tmp_path / "work" / "runs").iterdir()
+    first = torch.load(run / "checkpoint.pt", weights_only=True)["iteration"]
+    assert 1 <= first < 50
+    state_file = tmp_path / "work" / "pipeline_state.json"
+    state = json.loads(state_file.read_text()) if state_file.exists() else {}
+    assert "train sub1_box_000" not in state  # not recorded: the next run resumes it
+
+    ray.shutdown()
+    lines.clear()
+    ctx = run_pipeline(spec, progress=False, nthread=1, echo=lines.append, ray=options)
+    assert dict(ctx.summary)["train sub1_box_000"] == "ran", lines
+    assert torch.load(run / "checkpoint.pt", weights_only=True)["iteration"] == 50
+    assert pd.read_csv(run / "metrics.csv")["iteration"].tolist() == list(range(1, 51))
+    assert len(pd.read_parquet(run / "eval" / "quick" / "sub1_box_000.parquet")) == 4

@@ -4,7 +4,11 @@ A job (:class:`wristmimic.pipeline.Job`) trains one (dataset, scene) run and the
 ``[evaluate]`` protocol. The driver (the ``wristmimic run`` process) plans the jobs, skips those whose cache
 records are up to date, dispatches the rest with ``--ray-cpus-per-job`` / ``--ray-gpus-per-job`` resources and
 gathers each result as it arrives; it is the only writer of the work folder and of ``pipeline_state.json``.
-A failed job is reported with the worker's error; the others' results are kept and recorded.
+A failed job is reported with the worker's error; the others' results are kept and recorded. Ctrl-C on the
+driver asks every job to stop (a small Ray actor holds the request; jobs ask it at most once a second): training
+stops after its current iteration with a checkpoint, evaluation after its completed trials, and the driver
+gathers what the jobs saved, so running the pipeline again resumes them; a second Ctrl-C cancels the jobs and
+loses their progress since dispatch.
 
 Data movement (no shared filesystem needed):
 
@@ -39,6 +43,7 @@ import tempfile
 import time
 import traceback
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -122,16 +127,55 @@ class JobResult:
     note: str = ""
     host: str = ""
     seconds: float = 0.0
+    stopped: bool = False
+    """The job stopped on the driver's request (Ctrl-C), keeping its checkpoint / completed trials."""
+
+
+class StopFlag:
+    """Ray actor: the driver sets it on Ctrl-C; jobs read it (:func:`stop_check`)."""
+
+    def __init__(self) -> None:
+        self._set = False
+
+    def set(self) -> None:
+        self._set = True
+
+    def is_set(self) -> bool:
+        return self._set
+
+
+def stop_check(flag: Any, every_s: float = 1.0) -> Callable[[], bool] | None:
+    """A job's ``should_stop``: asks the driver's :class:`StopFlag` at most every ``every_s`` seconds; a flag
+    that cannot be reached counts as not set (the job goes on)."""
+    if flag is None:
+        return None
+    import ray
+
+    last, value = -float("inf"), False
+
+    def should_stop() -> bool:
+        nonlocal last, value
+        now = time.monotonic()
+        if not value and now - last >= every_s:
+            last = now
+            with contextlib.suppress(Exception):
+                value = bool(ray.get(flag.is_set.remote(), timeout=10))
+        return value
+
+    return should_stop
 
 
 # ------------------------------------------------------------------------------------------------ worker
 
 
-def run_job(work: JobWork, dataset: list[Any], run_archive: bytes | None) -> JobResult:
+def run_job(work: JobWork, dataset: list[Any], run_archive: bytes | None, stop_flag: Any = None) -> JobResult:
     """Ray task: train and/or evaluate one job in a scratch folder; returns the run folder as an archive.
 
-    ``dataset``: ``[ObjectRef]`` of the dataset's bytes (in a list so Ray does not fetch it unless needed)."""
+    ``dataset``: ``[ObjectRef]`` of the dataset's bytes (in a list so Ray does not fetch it unless needed);
+    ``stop_flag``: the driver's :class:`StopFlag` (Ctrl-C), or None."""
     import torch
+
+    from wristmimic.evaluate.runner import EvalInterrupted
 
     t0, host = time.perf_counter(), socket.gethostname()
     job = work.job
@@ -140,6 +184,7 @@ def run_job(work: JobWork, dataset: list[Any], run_archive: bytes | None) -> Job
     threads = torch.get_num_threads()
     notes: list[str] = []
     trained, data = False, None
+    should_stop = stop_check(stop_flag)
     try:
         _check_code(work)
         data = local_dataset(work.dataset_sha256, dataset)
@@ -149,25 +194,35 @@ def run_job(work: JobWork, dataset: list[Any], run_archive: bytes | None) -> Job
         if work.train:
             from wristmimic.pipeline import train_job
 
-            r = train_job(job.spec, run_dir, work.cpus, False, dataset_file=data)
+            r = train_job(job.spec, run_dir, work.cpus, False, dataset_file=data, should_stop=should_stop)
             if r.status == "interrupted":
-                raise WristmimicError("training interrupted; checkpoint kept, run the pipeline again to resume")
+                raise _Stopped(f"stopped at iteration {r.iteration} ({r.frames:,} frames), checkpoint kept")
             notes.append(f"trained: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
             trained = True
         if work.evaluate is not None and work.protocol is not None:
             from wristmimic.pipeline import evaluate_job
 
-            evaluate_job(run_dir, work.protocol, work.evaluate, work.cpus, False, data, Path(work.run_dir))
+            try:
+                evaluate_job(
+                    run_dir, work.protocol, work.evaluate, work.cpus, False, data, Path(work.run_dir), should_stop
+                )
+            except EvalInterrupted as exc:
+                raise _Stopped(f"evaluation stopped ({exc.completed:,} of {exc.total:,} trials kept)") from None
             notes.append(f"evaluated ({work.protocol.name})")
         return JobResult(True, "", pack_run(run_dir), trained, "; ".join(notes), host, _since(t0))
     except BaseException as exc:  # noqa: BLE001 - every failure goes back to the driver, with what was saved
         archive = pack_run(run_dir) if (run_dir / "config.json").is_file() else None
         error = _one_line(exc).replace(str(run_dir), work.run_dir)
         error = error.replace(str(data), str(job.spec.dataset)) if data else error  # the paths the user knows
-        return JobResult(False, error, archive, trained, "; ".join(notes), host, _since(t0))
+        stopped = isinstance(exc, _Stopped)
+        return JobResult(False, error, archive, trained, "; ".join(notes), host, _since(t0), stopped)
     finally:
         torch.set_num_threads(threads)
         shutil.rmtree(scratch, ignore_errors=True)
+
+
+class _Stopped(WristmimicError):
+    """A job stopped on the driver's request."""
 
 
 @functools.cache
@@ -312,6 +367,7 @@ class RayExecutor:
         self._connect(ctx)
         pending: dict[Any, tuple[Job, bool, bool]] = {}
         try:
+            flag = ray.remote(num_cpus=0)(StopFlag).remote()
             task = ray.remote(run_job)
             resources = {"num_cpus": opts.cpus_per_job, "num_gpus": opts.gpus_per_job, "max_retries": 1}
             refs: dict[str, Any] = {}
@@ -331,35 +387,51 @@ class RayExecutor:
                 )
                 archive = pack_run(job.run_dir) if job.run_dir.is_dir() else None
                 ref = task.options(name=f"wristmimic job {job.run_dir.name}", **resources).remote(
-                    work, [refs[sha]], archive
+                    work, [refs[sha]], archive, flag
                 )
                 pending[ref] = (job, train, ev)
-            total, done, failed = len(pending), 0, []
+            total, done, failed, stopping = len(pending), 0, [], False
             ctx.echo(f"ray: {total} job(s) dispatched ({opts.cpus_per_job} CPU, {opts.gpus_per_job:g} GPU each)")
             while pending:
-                ready, _ = ray.wait(list(pending), num_returns=1)
+                try:
+                    ready, _ = ray.wait(list(pending), num_returns=1)
+                except KeyboardInterrupt:
+                    if stopping:
+                        raise
+                    stopping = True
+                    flag.set.remote()
+                    ctx.echo(
+                        "ray: Ctrl-C: every job stops after its current training iteration (checkpoint kept) or its "
+                        "completed trials; waiting for them (press Ctrl-C again to cancel them and lose that progress)"
+                    )
+                    continue
                 job, train, ev = pending.pop(ready[0])
                 try:
                     res: JobResult = ray.get(ready[0])
                 except Exception as exc:  # the task itself failed: worker crash, unpicklable input, ...
                     res = JobResult(False, _one_line(exc))
                 what = f"done on {res.host} in {res.seconds:.1f} s: {res.note}" if res.ok else f"FAILED: {res.error}"
+                what = f"stopped: {res.error}" if res.stopped else what
                 ctx.echo(f"ray: {job.run_dir.name}: {what}")
                 if res.archive is not None:
                     unpack_run(res.archive, job.run_dir)
                 if train and res.trained:
                     ctx.record(job.unit, job.inputs, [job.checkpoint])
-                ctx.note(job.unit, "up to date" if not train else "ran" if res.trained else "failed")
+                halted = "stopped" if res.stopped else "failed"
+                ctx.note(job.unit, "up to date" if not train else "ran" if res.trained else halted)
                 if ev:
                     if res.ok:
                         ctx.record(eval_unit(job.run_dir), eval_inputs(job.run_dir, evaluate), [_out(job, protocol)])
                     ctx.note(
-                        eval_unit(job.run_dir), "ran" if res.ok else "failed" if res.trained or not train else "skipped"
+                        eval_unit(job.run_dir), "ran" if res.ok else halted if res.trained or not train else "skipped"
                     )
                 done += res.ok
-                if not res.ok:
+                if not res.ok and not res.stopped:
                     failed.append((job, res.error))
                 ctx.echo(f"ray: jobs {done} done, {len(pending)} running or queued, {len(failed)} failed (of {total})")
+            if stopping:
+                ctx.echo("ray: stopped; what the jobs saved is in the work folder: run the pipeline again to resume")
+                raise KeyboardInterrupt
             return failed
         except BaseException:  # Ctrl-C or an error here: stop what still runs (its progress is lost)
             for ref in pending:

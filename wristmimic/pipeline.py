@@ -295,12 +295,19 @@ def plan_jobs(ctx: Context, p: dict[str, Any]) -> list[Job]:
 
 
 def train_job(
-    spec: TrainSpec, run_dir: Path, nthread: int | None, progress: bool, dataset_file: Path | None = None
+    spec: TrainSpec,
+    run_dir: Path,
+    nthread: int | None,
+    progress: bool,
+    dataset_file: Path | None = None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> TrainResult:
-    """Start the run in ``run_dir``, or resume it from its checkpoint."""
+    """Start the run in ``run_dir``, or resume it from its checkpoint (``should_stop``: stop after an iteration,
+    checkpoint saved)."""
     from wristmimic.rl.train import resume_run, start_run
 
     kw: dict[str, Any] = {"nthread": nthread, "progress": progress, "dataset_file": dataset_file}
+    kw["should_stop"] = should_stop
     if (Path(run_dir) / "checkpoint.pt").exists():
         return resume_run(run_dir, **kw)
     return start_run(spec, run_dir, **kw)
@@ -314,6 +321,7 @@ def evaluate_job(
     progress: bool,
     dataset_file: Path | None = None,
     recorded_run_dir: Path | None = None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> Path:
     """Evaluate the run in ``run_dir`` under ``protocol`` with the ``[evaluate]`` table ``p``; returns
     ``run_dir/eval/<protocol>``. ``recorded_run_dir``: the run's path to record (when evaluated in a copy)."""
@@ -338,6 +346,7 @@ def evaluate_job(
         progress=progress,
         backend=p.get("backend", "cpu"),
         backend_options={"device": p["device"]} if p.get("device") else None,
+        should_stop=should_stop,
     )
     return out
 

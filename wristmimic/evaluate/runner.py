@@ -272,9 +272,11 @@ def evaluate_policy(
     progress: bool = True,
     backend: str = "cpu",
     backend_options: dict | None = None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> EvalResult:
     """Run (or resume) ``protocol`` for ``policy`` into ``out`` on physics ``backend`` (``cpu`` / ``warp``; the
-    backend is part of the evaluation's settings); raises :class:`EvalInterrupted` on Ctrl-C."""
+    backend is part of the evaluation's settings); raises :class:`EvalInterrupted` on Ctrl-C or when
+    ``should_stop()`` (asked as trials complete) turns true; completed parts are kept and a rerun resumes."""
     meta = policy.metadata
     n_trials = protocol.trials if trials is None else int(trials)
     if n_trials < 1 or num_envs < 1 or chunk < 1:
@@ -332,7 +334,13 @@ def evaluate_policy(
             policy.to(env.device)  # type: ignore[attr-defined]
         try:
             with _progress(f"{scene} ({meta.get('variant', '')})", start, n_trials, progress) as advance:
-                writer.on_advance = advance
+
+                def advance_or_stop(n: int) -> None:
+                    advance(n)
+                    if should_stop is not None and should_stop():
+                        raise KeyboardInterrupt
+
+                writer.on_advance = advance_or_stop
                 frames = run_trials(env, policy, settings, start, n_trials, writer)
         except KeyboardInterrupt:
             writer.flush()

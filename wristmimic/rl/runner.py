@@ -6,7 +6,7 @@ import contextlib
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -45,8 +45,9 @@ class Runner:
         self.stop_requested = False
         self.metrics: MetricsCsv | None = None
 
-    def learn(self, max_frames: int, progress: bool = True) -> str:
-        """Train until ``max_frames`` environment frames (or Ctrl-C); returns ``"finished"`` / ``"interrupted"``."""
+    def learn(self, max_frames: int, progress: bool = True, should_stop: Callable[[], bool] | None = None) -> str:
+        """Train until ``max_frames`` environment frames, Ctrl-C or ``should_stop()`` (asked after each iteration,
+        e.g. a Ray driver's stop request); returns ``"finished"`` / ``"interrupted"`` (a checkpoint is saved)."""
         self.metrics = self.metrics or MetricsCsv(self.run_dir / "metrics.csv")
         desc = f"{self.metadata['scene']} [{self.metadata['variant']}]"
         with stop_on_ctrl_c(self), train_progress(desc, self.frames, max_frames, progress) as bar:
@@ -65,6 +66,8 @@ class Runner:
                 bar.update(self.frames, row)
                 if self.iteration % self.cfg.checkpoint_every == 0:
                     self.save()
+                if should_stop is not None and should_stop():
+                    self.stop_requested = True
         self.save()
         return "interrupted" if self.stop_requested else "finished"
 

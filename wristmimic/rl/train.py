@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -139,8 +140,10 @@ def start_run(
     nthread: int | None = None,
     progress: bool = True,
     dataset_file: Path | None = None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> TrainResult:
-    """Create ``run_dir`` (must not hold a run yet), write ``config.json`` and train to ``spec.ppo.max_frames``.
+    """Create ``run_dir`` (must not hold a run yet), write ``config.json`` and train to ``spec.ppo.max_frames``
+    (or until ``should_stop()`` turns true after an iteration: status ``interrupted``, checkpoint saved).
 
     ``dataset_file``: read the data from this copy of ``spec.dataset`` (e.g. a Ray worker's local copy);
     ``config.json`` still records ``spec.dataset`` and the sha256 of the bytes read."""
@@ -160,7 +163,7 @@ def start_run(
         tmp.write_text(dumps(config) + "\n")
     runner = _build(config, run_dir, nthread, data)
     try:
-        status = runner.learn(spec.ppo.max_frames, progress)
+        status = runner.learn(spec.ppo.max_frames, progress, should_stop)
     finally:
         runner.env.close()
     return TrainResult(run_dir, status, runner.iteration, runner.frames)
@@ -172,8 +175,10 @@ def resume_run(
     nthread: int | None = None,
     progress: bool = True,
     dataset_file: Path | None = None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> TrainResult:
-    """Continue a run from its ``checkpoint.pt`` exactly where it stopped (to ``max_frames`` if given).
+    """Continue a run from its ``checkpoint.pt`` exactly where it stopped (to ``max_frames`` if given;
+    ``should_stop`` as in :func:`start_run`).
 
     ``dataset_file``: read the data from this copy of the recorded dataset (its sha256 must match)."""
     run_dir = Path(run_dir)
@@ -188,7 +193,7 @@ def resume_run(
     try:
         runner.load_state_dict(state)
         budget = max_frames if max_frames is not None else config["ppo"]["max_frames"]
-        status = runner.learn(budget, progress) if runner.frames < budget else "up to date"
+        status = runner.learn(budget, progress, should_stop) if runner.frames < budget else "up to date"
     finally:
         runner.env.close()
     return TrainResult(run_dir, status, runner.iteration, runner.frames)
