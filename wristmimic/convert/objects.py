@@ -460,6 +460,20 @@ def load_object(
     props: dict[str, Any] = {}
     if urdf_path is not None:
         _, props = read_urdf(urdf_path)
+    return asset_from_mesh(name, mesh_path, urdf_path, props, density, n_surface, surface_seed)
+
+
+def asset_from_mesh(
+    name: str,
+    mesh_path: Path,
+    urdf_path: Path | None,
+    props: dict[str, Any],
+    density: float,
+    n_surface: int,
+    surface_seed: int,
+) -> ObjectAsset:
+    """An :class:`ObjectAsset` from a mesh file and its URDF properties ``props`` (``mesh_scale``,
+    ``inertial_mass``; empty for a bare mesh): mass properties, surface samples, the URDF mass if stated."""
     vertices, faces = load_obj(mesh_path, props.get("mesh_scale"))
     try:
         mesh_hash = hashlib.sha256(mesh_path.read_bytes()).hexdigest()

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from wristmimic.convert.common import ConvertOptions, ConvertReport, object_record
-from wristmimic.convert.objects import ObjectAsset, load_obj, mass_properties, sample_surface_points
+from wristmimic.convert.objects import ObjectAsset, asset_from_mesh
 from wristmimic.errors import InputError
 from wristmimic.rotations import quat_rotate
 
@@ -39,29 +39,8 @@ def mesh_asset(name: str, mesh_path: Path, opts: ConvertOptions, scale: float = 
         raise InputError(mesh_path, "mesh", "file not found", "an OBJ mesh")
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(mesh_path, "scale", f"invalid scale {scale}", "a finite number > 0")
-    vertices, faces = load_obj(mesh_path, None if scale == 1.0 else [scale] * 3)
-    try:
-        mass, com, inertia, method, watertight = mass_properties(vertices, faces, opts.object_density)
-        points = sample_surface_points(vertices, faces, opts.surface_points, opts.surface_seed)
-    except InputError as e:
-        raise InputError(mesh_path, e.key, e.problem, e.expected) from None
-    return ObjectAsset(
-        name=name,
-        vertices=vertices,
-        faces=faces,
-        mesh_path=mesh_path,
-        urdf_path=None,
-        mesh_sha256=hashlib.sha256(mesh_path.read_bytes()).hexdigest(),
-        urdf={} if scale == 1.0 else {"mesh_scale": [scale] * 3},
-        density=opts.object_density,
-        mass=mass,
-        com=com,
-        inertia=inertia,
-        mass_method=method,
-        watertight=watertight,
-        surface_points=points,
-        surface_seed=opts.surface_seed,
-    )
+    props = {} if scale == 1.0 else {"mesh_scale": [scale] * 3}
+    return asset_from_mesh(name, mesh_path, None, props, opts.object_density, opts.surface_points, opts.surface_seed)
 
 
 def write_part_objects(
