@@ -268,7 +268,7 @@ def plan_jobs(ctx: Context, p: dict[str, Any]) -> list[Job]:
         datasets = [Path(p.get("dataset") or ctx.outputs.get("dataset") or _require(p, "train", "dataset"))]
     variant, seed, name = p.get("variant", "wristmimic"), int(p.get("seed", 0)), p.get("preset", "cpu")
     ppo = preset(name, **p.get("ppo", {}))
-    backend = p.get("backend", "cpu")
+    backend, device = p.get("backend", "cpu"), p.get("device")
     if backend not in BACKENDS:
         raise InputError(ctx.spec_path, "train.backend", f"{backend!r}", f"one of {', '.join(BACKENDS)}")
     jobs = []
@@ -281,12 +281,13 @@ def plan_jobs(ctx: Context, p: dict[str, Any]) -> list[Job]:
                 scenes = list(ds.sequence_ids)
         sha = sha256_file(dataset)
         for scene in scenes:
-            spec = TrainSpec(dataset, scene, variant, seed, name, ppo, ref_frames=p.get("ref_frames"))
-            spec.backend, spec.device = backend, p.get("device")
+            spec = TrainSpec(
+                dataset, scene, variant, seed, name, ppo, ref_frames=p.get("ref_frames"), backend=backend, device=device
+            )
             inputs = {"dataset_sha256": sha, "scene": scene, "variant": variant, "seed": seed}
             inputs |= {"ppo": to_jsonable(ppo), "ref_frames": spec.ref_frames, "code": wristmimic.__version__}
             if backend != "cpu":  # CPU runs keep the keys (and run folders) they had before backends existed
-                inputs |= {"physics": {"backend": backend, "device": p.get("device")}}
+                inputs |= {"physics": {"backend": backend, "device": device}}
             key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:8]
             run_dir = ctx.work_dir / "runs" / f"{scene}-{variant}-seed{seed}-{key}"
             unit = f"train {scene}" if len(datasets) == 1 else f"train {dataset.stem}/{scene}"

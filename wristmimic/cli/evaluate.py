@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from wristmimic.cli.errors import user_errors
+from wristmimic.cli.options import backend_option, device_option
 
 
 def evaluate_cmd(
@@ -30,10 +31,8 @@ def evaluate_cmd(
     ),
     seed: int = typer.Option(None, "--seed", min=0, help="Base seed of the trial seeds (default: the protocol's)."),
     dataset: Path = typer.Option(None, "--dataset", help="Canonical file to use instead of the run's (same sha256)."),
-    backend: str = typer.Option(
-        "cpu", "--backend", help="Physics: cpu (MuJoCo threads) or warp (MuJoCo Warp; policy and math on its device)."
-    ),
-    device: str = typer.Option(None, "--device", help="Warp device: cuda, cuda:N or cpu (default: a GPU if any)."),
+    backend: str = backend_option(),
+    device: str = device_option(),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Run rollout trials from frame 0 and write <scene>.parquet (one row per trial), summary.json and summary.csv.

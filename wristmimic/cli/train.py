@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from wristmimic.cli.errors import user_errors
+from wristmimic.cli.options import backend_option, device_option
 from wristmimic.errors import InputError
 
 
@@ -36,10 +37,8 @@ def train_cmd(
     seed: int = typer.Option(0, "--seed", help="Seed of networks, action noise, minibatches and start frames."),
     resume: Path = typer.Option(None, "--resume", help="Continue this run folder exactly where it stopped."),
     nthread: int = typer.Option(None, "--nthread", help="Physics threads (default: all cores)."),
-    backend: str = typer.Option(
-        "cpu", "--backend", help="Physics: cpu (MuJoCo threads) or warp (MuJoCo Warp: GPU worlds, torch on the GPU)."
-    ),
-    device: str = typer.Option(None, "--device", help="Warp device: cuda, cuda:N or cpu (default: a GPU if any)."),
+    backend: str = backend_option(),
+    device: str = device_option(),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Train one PPO policy per scene; each run folder gets config.json, metrics.csv and checkpoint.pt.

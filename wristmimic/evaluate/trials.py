@@ -94,15 +94,15 @@ def perturb_initial_state(
     """Add seeded Gaussian noise to the hinge angles and root position of worlds ``ids`` (just reset); returns
     the new observation of every world."""
     dev = env.device
+    rows = ids.to(dev)
     mask = torch.zeros(env.num_worlds, dtype=torch.bool, device=dev)
-    mask[ids.to(dev)] = True
-    rows = torch.zeros(env.num_worlds, dtype=torch.long)
-    rows[ids] = seeds  # every world gets a row of noise; only the masked ones are used
+    mask[rows] = True
     qpos, qvel = env.backend.qpos.double().clone(), env.backend.qvel.double().clone()
     adr = torch.as_tensor(env.scene.hinge_qposadr.reshape(-1), device=dev)
-    zero = torch.zeros(env.num_worlds, dtype=torch.long)
-    qpos[:, adr] += noise.joint_angle_rad * normal(rows, zero, len(adr), NOISE_STREAM_JOINTS).double().to(dev)
-    qpos[:, 0:3] += noise.root_position_m * normal(rows, zero, 3, NOISE_STREAM_ROOT).double().to(dev)
+    zero = torch.zeros(len(ids), dtype=torch.long)  # noise is drawn for the reset worlds only
+    joints = noise.joint_angle_rad * normal(seeds, zero, len(adr), NOISE_STREAM_JOINTS).double().to(dev)
+    qpos[rows[:, None], adr[None]] += joints
+    qpos[rows, 0:3] += noise.root_position_m * normal(seeds, zero, 3, NOISE_STREAM_ROOT).double().to(dev)
     env.backend.reset(mask, qpos, qvel)
     return env.observe()
 
