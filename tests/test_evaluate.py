@@ -31,7 +31,11 @@ from synthetic import write_intermimic_folder
 
 SID = "sub1_box_000"
 # lax base terminations: trials last 8-15 frames with the stand-in policy (a mix of reasons), no wrist resets
-LAX = EnvConfig(wrist_resets=False, termination=TerminationConfig(body_error=1.0, object_error=1.0))
+# absolute actions: a random stand-in policy then makes trials end at different frames (residual actions around
+# the reference keep every trial of such a short clip alive to its end)
+LAX = EnvConfig(
+    wrist_resets=False, termination=TerminationConfig(body_error=1.0, object_error=1.0), action_mode="absolute"
+)
 NO_END = EnvConfig(
     wrist_resets=False,
     termination=TerminationConfig(fall_height=-1e9, body_error=1e9, object_error=1e9, contact_lost_frames=10**6),

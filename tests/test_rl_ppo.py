@@ -149,3 +149,61 @@ def test_configs_round_trip_through_json(cfg) -> None:
     assert from_jsonable(type(cfg), to_jsonable(cfg)) == cfg
     with pytest.raises(InputError, match="unknown field"):
         from_jsonable(type(cfg), {**to_jsonable(cfg), "bogus": 1})
+
+
+def test_adaptive_schedule_lowers_the_rate_above_twice_the_target_and_raises_it_below_half() -> None:
+    net = ActorCritic(4, 2, (8,), (8,), log_std=-1.0)
+    cfg = PPOConfig(num_envs=8, horizon=4, minibatch_size=32, schedule="adaptive", learning_rate=1e-3, lr_min=1e-4)
+    alg = PPO(net, cfg)
+    alg._adapt_learning_rate(0.05)
+    assert alg.learning_rate == pytest.approx(1e-3 / 1.5)
+    alg._adapt_learning_rate(0.001)
+    assert alg.learning_rate == pytest.approx(1e-3)
+    alg._adapt_learning_rate(0.015)  # inside [0.5, 2] x desired: unchanged
+    assert alg.learning_rate == pytest.approx(1e-3)
+    for _ in range(20):
+        alg._adapt_learning_rate(1.0)
+    assert alg.learning_rate == pytest.approx(1e-4)  # clamped
+    with pytest.raises(InputError, match="schedule"):
+        PPOConfig(schedule="cosine")
+
+
+def test_adaptive_update_logs_rate_and_sigma_and_keeps_kl_near_the_target() -> None:
+    torch.manual_seed(0)
+    net = ActorCritic(4, 2, (32,), (32,), log_std=-1.0, learn_std=True, min_log_std=math.log(0.3))
+    cfg = PPOConfig(num_envs=8, horizon=4, minibatch_size=8, epochs=4, schedule="adaptive", learning_rate=1e-1)
+    alg = PPO(net, cfg)
+    st = _filled_storage(net)
+    alg.compute_returns(st, torch.zeros(8))
+    losses = alg.update(st, torch.Generator().manual_seed(0))
+    assert losses["loss/learning_rate"] < 1e-1  # a huge first step was cut back
+    assert losses["loss/sigma"] >= 0.3 - 1e-6
+    assert any(p is net.log_std_param for p in alg.optimizer.param_groups[0]["params"])
+
+
+def test_learned_sigma_is_a_parameter_with_a_floor_and_old_checkpoints_load() -> None:
+    net = ActorCritic(6, 3, (16,), (16,), log_std=-1.0, learn_std=True, min_log_std=-2.0)
+    assert "log_std_param" in dict(net.named_parameters())
+    with torch.no_grad():
+        net.log_std_param.fill_(-5.0)
+    assert torch.equal(net.log_std, torch.full((3,), -2.0))
+    fixed = ActorCritic(6, 3, (16,), (16,), log_std=-2.9)
+    old = {("log_std" if k == "log_std_param" else k): v for k, v in fixed.state_dict().items()}
+    again = ActorCritic(6, 3, (16,), (16,), log_std=0.0)
+    again.load_state_dict(old)  # a checkpoint from before learned sigma stored 'log_std'
+    assert torch.equal(again.log_std, torch.full((3,), -2.9))
+
+
+def test_clipped_value_loss_is_never_below_the_plain_one() -> None:
+    torch.manual_seed(0)
+    losses = {}
+    for clipped in (False, True):
+        torch.manual_seed(0)
+        net = ActorCritic(4, 2, (8,), (8,), log_std=-1.0)
+        cfg = PPOConfig(num_envs=8, horizon=4, minibatch_size=32, epochs=1, clip_value_loss=clipped)
+        st = _filled_storage(net)
+        st.values += 3.0  # stale values far from the returns
+        alg = PPO(net, cfg)
+        alg.compute_returns(st, torch.zeros(8))
+        losses[clipped] = alg.update(st, torch.Generator().manual_seed(0))["loss/value"]
+    assert losses[True] >= losses[False]

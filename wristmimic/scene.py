@@ -67,6 +67,10 @@ class SceneConfig:
     floor: bool = True
     visual_meshes: bool = True
     """Add each object's visual mesh as a non-colliding geom (group 2) for viewers."""
+    object_actuators: bool = False
+    """Six force/torque motors on each dynamic object's free joint (``voc_<object>_<k>``, world force, local
+    torque): the training-only virtual object controller drives them. Training adds them to its own scene;
+    ``config.json``, evaluation and viewers never have them."""
 
     @property
     def control_dt(self) -> float:
@@ -295,6 +299,13 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
     for k, oid in enumerate(seq.object_ids):
         _add_object(spec, oid, records[oid], oid in dyn, obj_pos[k], obj_quat[k], cfg)
     _add_sensors(spec, skel, dyn)
+    if cfg.object_actuators:
+        for oid in dyn:
+            for k in range(6):
+                act = spec.add_actuator(name=f"voc_{oid}_{k}", target=f"obj_{oid}")
+                act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+                act.gear = [float(i == k) for i in range(6)]
+                act.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
     spec.add_numeric(name="wristmimic_control_substeps", data=[float(cfg.substeps)])
     spec.add_text(name="wristmimic_sequence", data=sequence_id)
     try:

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+ACTION_MODES = ("residual", "absolute")
+"""How policy actions become PD targets (:attr:`EnvConfig.action_mode`)."""
+
 VARIANTS = ("wristmimic", "decoupled", "reward-modulation-only", "reset-only", "finger-guidance", "intermimic")
 
 
@@ -91,6 +94,54 @@ class TerminationConfig:
 
 
 @dataclass(frozen=True)
+class ObjectControllerConfig:
+    """Training-only virtual object controller (DexMachina): a PD wrench pulls each dynamic object toward its
+    reference pose of the frame being stepped to, scaled by a gain the training curriculum lowers to exactly
+    zero. Gains are per unit mass / inertia, so one setting fits every object. Evaluation, ``view`` and
+    ``export`` build scenes without the controller's actuators and never apply it."""
+
+    enabled: bool = True
+    """Use the controller during training (the curriculum starts at ``initial_gain``)."""
+    kp: float = 100.0
+    """Position stiffness (1/s^2): force = gain * m * (kp e_p + kd e_v + gravity compensation)."""
+    kd: float = 20.0
+    """Linear damping toward the reference velocity (1/s); critical for kp = 100."""
+    kr: float = 100.0
+    """Rotation stiffness (1/s^2, per unit of the mean principal inertia)."""
+    dr: float = 20.0
+    """Angular damping toward the reference angular velocity (1/s)."""
+    initial_gain: float = 1.0
+    """Gain at the start of training (1: the object follows its reference and its weight is carried)."""
+    decay: float = 0.8
+    """The gain is multiplied by this after every iteration whose episodes pass ``survival``."""
+    survival: float = 0.5
+    """Decay when the iteration's projected full-clip survival (1 - terminations / steps)^(T - 1) is above this."""
+    min_gain: float = 0.05
+    """A gain below this becomes exactly zero."""
+    zero_by_frames: int = 150_000
+    """The gain is also capped by 1 - frames / zero_by_frames: exactly zero after this many training frames
+    (a fixed count, not a share of the budget, so a run resumed with a larger budget continues bit for bit)."""
+
+
+@dataclass(frozen=True)
+class StartSamplingConfig:
+    """Where training episodes start (besides the ``reset_frame0_prob`` share at frame 0)."""
+
+    adaptive: bool = True
+    """Start in proportion to recent failures (BeyondMimic); False: uniform over the clip (InterMimic's RSI)."""
+    bin_frames: int = 10
+    """Frames per bin of the failure statistics (BeyondMimic: 1 s; short clips need finer bins)."""
+    alpha: float = 0.01
+    """Moving-average rate of the failures per environment step."""
+    uniform: float = 0.1
+    """Share of starts drawn uniformly over the bins."""
+    kernel: int = 3
+    """A bin's weight includes the failures of this many bins from it on."""
+    kernel_lambda: float = 0.8
+    """Weight lambda^k of the failures k bins later."""
+
+
+@dataclass(frozen=True)
 class EnvConfig:
     """The WristMimic environment. Defaults = the paper's method (variant 'wristmimic')."""
 
@@ -121,9 +172,52 @@ class EnvConfig:
     max_episode_frames: int = 300
     """Training episodes are truncated after this many frames (InterMimic rolloutLength 300)."""
     reset_frame0_prob: float = 0.1
-    """Reference state initialisation: probability of starting at frame 0 (else a uniform frame)."""
+    """Reference state initialisation: probability of starting at frame 0 (else from ``starts``)."""
+    starts: StartSamplingConfig = field(default_factory=StartSamplingConfig)
+    """Start frames of training episodes that do not start at frame 0."""
+    object_controller: ObjectControllerConfig = field(default_factory=ObjectControllerConfig)
+    """Training-only object curriculum (virtual object controller)."""
+    action_mode: str = "residual"
+    """``residual``: body and wrist hinges target the reference angle of the frame being stepped to plus
+    ``residual_scale * a``; finger hinges stay absolute (no finger reference: the method's premise, and a
+    swapped hand has none). ``absolute``: every hinge targets offset + scale * a (InterMimic / paper parity)."""
+    velocity_feedforward: bool = True
+    """Residual hinges target q_ref + (kv / kp) q_ref_dot: the position actuator's damping then pulls toward the
+    reference velocity instead of zero (no lag on moving joints)."""
+    residual_scale: float = 0.5
+    """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
-    """Actions in [-1, 1] map to PD targets offset + action_scale * scale * a (InterMimic's mapping)."""
+    """Absolute targets (every hinge in ``absolute`` mode, fingers in ``residual`` mode) are
+    offset + action_scale * scale * a with InterMimic's mid-range offset and half-range scale."""
+
+
+LEGACY_ENV_DEFAULTS = {
+    "action_mode": "absolute",
+    "velocity_feedforward": False,
+    "object_controller": {"enabled": False},
+    "starts": {"adaptive": False},
+}
+"""What a run's recorded ``env`` meant when it predates a field: absolute actions, no object curriculum, uniform
+starts."""
+
+
+def env_config_from_dict(data: dict) -> EnvConfig:
+    """An :class:`EnvConfig` from a run's recorded ``env``; fields it predates keep their old behaviour."""
+    from wristmimic.rl.config import from_jsonable
+
+    full = {**LEGACY_ENV_DEFAULTS, **data}
+    return from_jsonable(EnvConfig, full)
+
+
+def check_env_config(cfg: EnvConfig) -> None:
+    """Refuse values no environment can run with (one-line ``ValueError``)."""
+    if cfg.action_mode not in ACTION_MODES:
+        raise ValueError(f"unknown action_mode {cfg.action_mode!r}; expected one of {', '.join(ACTION_MODES)}")
+    if not cfg.residual_scale > 0 or not cfg.action_scale > 0:
+        raise ValueError("residual_scale and action_scale must be > 0")
+    st = cfg.starts
+    if st.bin_frames < 1 or st.kernel < 1 or not 0 < st.alpha <= 1 or not 0 <= st.uniform <= 1:
+        raise ValueError("starts: bin_frames and kernel >= 1, alpha in (0, 1], uniform in [0, 1]")
 
 
 def variant_config(name: str, **overrides: object) -> EnvConfig:

@@ -75,3 +75,13 @@ def tan_norm_6d(q: torch.Tensor) -> torch.Tensor:
         ],
         dim=-1,
     )
+
+
+def quat_to_rotvec(q: torch.Tensor) -> torch.Tensor:
+    """(..., 4) wxyz -> (..., 3) rotation vector (axis * angle, angle in [0, pi]); the shorter way round."""
+    q = torch.where(q[..., :1] < 0, -q, q)
+    v = q[..., 1:]
+    s = torch.linalg.vector_norm(v, dim=-1, keepdim=True)
+    angle = 2.0 * torch.atan2(s, q[..., :1])
+    scale = torch.where(s > 1e-8, angle / s.clamp_min(1e-8), torch.full_like(s, 2.0))  # small angles: 2 v
+    return v * scale

@@ -16,17 +16,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import torch
 
 from wristmimic.env import window as W
 from wristmimic.env.bodies import BodySets
-from wristmimic.env.config import EnvConfig
+from wristmimic.env.config import EnvConfig, check_env_config
 from wristmimic.env.observations import RefFrame, SimState, goal_obs, heading_inverse, nearest_vectors, state_obs
 from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import RewardInputs, compute_reward
+from wristmimic.env.starts import AdaptiveStarts
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
-from wristmimic.env.torch_math import quat_angle, quat_rotate
+from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_rotate, quat_to_rotvec
 from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
@@ -89,6 +91,7 @@ class WristMimicEnv:
         backend_options: dict | None = None,
     ):
         self.scene, self.cfg = scene, config or EnvConfig()
+        check_env_config(self.cfg)
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
         if isinstance(backend, str):
@@ -106,6 +109,7 @@ class WristMimicEnv:
         self.start = torch.zeros(N, dtype=torch.long, device=dev)
         self.steps = torch.zeros(N, dtype=torch.long, device=dev)
         self.lost = ContactLostCounter(N, dev)
+        self.starts = AdaptiveStarts(self.cfg.starts, reference.num_frames, dev) if self.cfg.starts.adaptive else None
         roles = scene.humanoid.roles
 
         def idx(a: object) -> torch.Tensor:
@@ -136,6 +140,13 @@ class WristMimicEnv:
 
         self._offset, self._scale = f32(offset), f32(scale * self.cfg.action_scale)
         self._lo, self._hi = f32(lo), f32(hi)
+        # residual mode: body and wrist hinges around the reference of the next frame, fingers absolute
+        finger_joint = np.isin(scene.skeleton.joint_bodies, np.asarray(roles["fingers"]))
+        self.residual_hinges = torch.as_tensor(
+            np.repeat(~finger_joint, 3) & (self.cfg.action_mode == "residual"), device=dev
+        )
+        """(J*3,) bool: hinges whose PD target is reference + residual_scale * a (none in absolute mode)."""
+        self._ff_time = f32(scene.gains[:, 1] / scene.gains[:, 0] * float(self.cfg.velocity_feedforward))
         self._ctrl = torch.zeros(N, scene.model.nu, device=dev)
         self._act_cols = idx(scene.actuator_ids.reshape(-1))
         self._prev_joint_vel = torch.zeros(N, len(self._act_cols), device=dev)
@@ -146,6 +157,21 @@ class WristMimicEnv:
         self._obj_qpos = idx([o.qposadr for o in scene.dynamic_objects])
         self._obj_dof = idx([o.dofadr for o in scene.dynamic_objects])
         self.action_size = len(self._act_cols)
+        # virtual object controller (training only): motors on the objects' free joints, if the scene has them
+        m = scene.model
+        voc = [
+            [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"voc_{o.id}_{k}") for k in range(6)]
+            for o in scene.dynamic_objects
+        ]
+        self.has_object_controller = bool(voc) and min(min(r) for r in voc) >= 0
+        self._voc_cols = idx(voc if self.has_object_controller else np.zeros((0, 6), int))
+        bids = [o.body_id for o in scene.dynamic_objects]
+        self._obj_mass = f32(m.body_mass[bids])[:, None] if bids else torch.zeros(0, 1, device=dev)
+        self._obj_inertia = f32(m.body_inertia[bids].mean(-1))[:, None] if bids else torch.zeros(0, 1, device=dev)
+        self._gravity = f32(-m.opt.gravity)
+        self.object_gain = 0.0
+        """Gain of the virtual object controller (0: off). Set by the training curriculum; needs a scene built
+        with ``SceneConfig(object_actuators=True)``."""
         self._obs_layout: dict[str, slice] = {}
         self.observation_size = 0
 
@@ -187,9 +213,13 @@ class WristMimicEnv:
         return self._observe(), {}
 
     def sample_start_frames(self, n: int) -> torch.Tensor:
-        """Frame 0 with probability ``reset_frame0_prob``, else uniform over [0, T - 2]."""
+        """Frame 0 with probability ``reset_frame0_prob``, else failure-weighted (``starts.adaptive``) or uniform
+        over [0, T - 2]."""
         T = self.ref.num_frames
-        uniform = torch.randint(0, max(T - 1, 1), (n,), generator=self._gen, device=self.device)
+        if self.starts is not None:
+            uniform = self.starts.sample(n, self._gen)
+        else:
+            uniform = torch.randint(0, max(T - 1, 1), (n,), generator=self._gen, device=self.device)
         zero = torch.rand(n, generator=self._gen, device=self.device) < self.cfg.reset_frame0_prob
         return torch.where(zero, torch.zeros_like(uniform), uniform)
 
@@ -296,9 +326,16 @@ class WristMimicEnv:
         return torch.cat(list(parts.values()), dim=1)
 
     # -- step ----------------------------------------------------------------------------------------------
-    def action_to_ctrl(self, action: torch.Tensor) -> torch.Tensor:
-        """Actions in [-1, 1] -> PD targets (rad), clipped to the joint ranges."""
-        target = self._offset + self._scale * action.clamp(-1.0, 1.0)
+    def action_to_ctrl(self, action: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
+        """Actions in [-1, 1] -> PD targets (rad), clipped to the joint ranges. Residual hinges add
+        ``residual_scale * a`` to the reference angle at ``frames`` (default: the frame being stepped to)."""
+        a = action.clamp(-1.0, 1.0)
+        target = self._offset + self._scale * a
+        if self.cfg.action_mode == "residual":
+            f = (self.frame + 1 if frames is None else frames).clamp(0, self.ref.num_frames - 1)
+            ref = self.ref.joint_angles[f] + self._ff_time * self.ref.joint_vel[f]
+            residual = ref + self.cfg.residual_scale * a
+            target = torch.where(self.residual_hinges, residual, target)
         return torch.maximum(torch.minimum(target, self._hi), self._lo)
 
     def step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
@@ -312,6 +349,8 @@ class WristMimicEnv:
 
     def _step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
         self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(self.device, torch.float32))
+        if self.object_gain > 0.0:
+            self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench().flatten(1)
         self.backend.step(self._ctrl, self.scene.config.substeps)
         self.frame += 1
         self.steps += 1
@@ -321,6 +360,8 @@ class WristMimicEnv:
         _, phase = self._window()
         reward, terms = self._reward(s, rf, hand, phase)
         terminated, reason = self._terminations(s, rf, hand, phase)
+        if self.starts is not None:
+            self.starts.record(self.frame, terminated)
         T = self.ref.num_frames
         truncated = ((self.frame >= T - 1) | (self.steps >= self.cfg.max_episode_frames)) & ~terminated
         done = terminated | truncated
@@ -339,6 +380,22 @@ class WristMimicEnv:
             self._reset_worlds(done)
             s = None
         return self._observe(s), reward, terminated, truncated, info
+
+    def object_wrench(self) -> torch.Tensor:
+        """(N, O, 6) virtual object controller: world force and local torque pulling each dynamic object toward
+        its reference at the frame being stepped to, times :attr:`object_gain` (gravity compensated)."""
+        if not self.has_object_controller:
+            raise RuntimeError("object_gain > 0 needs a scene built with SceneConfig(object_actuators=True)")
+        c, r = self.cfg.object_controller, self.ref
+        f = (self.frame + 1).clamp(0, r.num_frames - 1)
+        k3, k4 = torch.arange(3, device=self.device), torch.arange(4, device=self.device)
+        qpos, qvel = self.backend.qpos.to(torch.float32), self.backend.qvel.to(torch.float32)
+        pos, quat = qpos[:, self._obj_qpos[:, None] + k3], qpos[:, self._obj_qpos[:, None] + 3 + k4]
+        lin, ang = qvel[:, self._obj_dof[:, None] + k3], qvel[:, self._obj_dof[:, None] + 3 + k3]
+        acc = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin) + self._gravity
+        rot = quat_to_rotvec(quat_mul(quat_conj(quat), r.obj_quat[f]))  # local frame
+        alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)
+        return self.object_gain * torch.cat([self._obj_mass * acc, self._obj_inertia * alpha], -1)
 
     def _sim_hand(self, s: SimState) -> torch.Tensor:
         """(N, 2) bool: any body of the left / right hand touches a dynamic object."""
@@ -434,6 +491,7 @@ class WristMimicEnv:
             "prev_joint_vel": self._prev_joint_vel.clone(),
             "prev_obj_vel": self._prev_obj_vel.clone(),
             "generator": self._gen.get_state(),
+            "start_failures": None if self.starts is None else self.starts.failures.clone(),
             "sequence_id": self.scene.sequence_id,
             "num_worlds": self.num_worlds,
         }
@@ -453,6 +511,8 @@ class WristMimicEnv:
         self._prev_joint_vel[:] = state["prev_joint_vel"]  # type: ignore[index]
         self._prev_obj_vel[:] = state["prev_obj_vel"]  # type: ignore[index]
         self._gen.set_state(state["generator"].cpu())  # type: ignore[union-attr]
+        if self.starts is not None and state.get("start_failures") is not None:
+            self.starts.failures[:] = state["start_failures"]  # type: ignore[index]
 
     def observe(self) -> torch.Tensor:
         """The current observation of every world (e.g. after :meth:`load_state_dict`)."""

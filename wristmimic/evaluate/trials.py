@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from wristmimic.env.config import EnvConfig
+from wristmimic.env.config import EnvConfig, env_config_from_dict
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.evaluate.metrics import TrialSums, is_success
 from wristmimic.evaluate.noise import normal, trial_seeds
@@ -50,9 +50,7 @@ def eval_env_config(env: EnvConfig | dict[str, Any], early_termination: str = "r
     """The run's environment config for evaluation: every (auto-)reset at frame 0, no truncation before the end
     of the sequence; ``early_termination="base"`` turns the wrist resets off."""
     if isinstance(env, dict):
-        from wristmimic.rl.config import from_jsonable
-
-        env = from_jsonable(EnvConfig, env)
+        env = env_config_from_dict(env)
     cfg = replace(env, reset_frame0_prob=1.0, max_episode_frames=2**31 - 1)
     return replace(cfg, wrist_resets=False) if early_termination == "base" else cfg
 

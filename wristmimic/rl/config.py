@@ -16,6 +16,9 @@ from typing import Any
 
 from wristmimic.errors import InputError
 
+SCHEDULES = ("fixed", "adaptive")
+"""Learning-rate schedules of :class:`PPOConfig`."""
+
 
 @dataclass(frozen=True)
 class PPOConfig:
@@ -30,7 +33,19 @@ class PPOConfig:
     epochs: int = 6
     """Passes over the rollout per update (InterMimic ``mini_epochs``)."""
     learning_rate: float = 2e-5
-    """Adam step size, constant."""
+    """Adam step size: constant (``schedule = "fixed"``) or the starting value of the adaptive schedule."""
+    schedule: str = "fixed"
+    """``fixed`` learning rate, or ``adaptive`` (rsl_rl): after every minibatch step, lr / 1.5 where the
+    approx KL exceeds 2 x ``desired_kl``, lr x 1.5 where it is below half of it, clamped to [lr_min, lr_max]."""
+    desired_kl: float = 0.01
+    """Target approx KL of the adaptive schedule."""
+    lr_min: float = 1e-5
+    """Lower clamp of the adaptive learning rate."""
+    lr_max: float = 1e-2
+    """Upper clamp of the adaptive learning rate."""
+    critic_learning_rate: float | None = None
+    """A fixed Adam step size of its own for the critic (ProtoMotions: actor 2e-5, critic 1e-4); None: the critic
+    shares the actor's (fixed or adaptive) rate."""
     gamma: float = 0.99
     """Discount factor."""
     lam: float = 0.95
@@ -39,6 +54,10 @@ class PPOConfig:
     """PPO ratio clip epsilon (InterMimic ``e_clip``)."""
     value_coef: float = 5.0
     """Weight of the value loss 0.5 (V - R)^2 (InterMimic ``critic_coef``)."""
+    clip_value_loss: bool = False
+    """PPO2's clipped value loss: max((V - R)^2, (V_old + clip(V - V_old, +-clip) - R)^2)."""
+    entropy_coef: float = 0.0
+    """Weight of the entropy bonus (only moves a learned sigma)."""
     bounds_loss_coef: float = 10.0
     """Weight of the soft action-bound loss on the mean: sum_i max(|mu_i| - action_bound, 0)^2."""
     action_bound: float = 1.0
@@ -52,16 +71,29 @@ class PPOConfig:
     critic_hidden: tuple[int, ...] = (1024, 1024, 512)
     """Hidden widths of the critic MLP (SiLU)."""
     log_std: float = -2.9
-    """Fixed log sigma of the Gaussian policy (InterMimic: -2.9, sigma ~ 0.055); not learned."""
+    """Log sigma of the Gaussian policy: fixed (InterMimic: -2.9, sigma ~ 0.055), or the start of a learned one."""
+    learn_std: bool = False
+    """Learn a state-independent log sigma (rsl_rl) instead of keeping ``log_std`` fixed."""
+    min_std: float = 0.0
+    """Floor of a learned sigma (0: none)."""
     obs_clip: float = 5.0
     """Normalised observations are clipped to [-obs_clip, obs_clip]."""
     max_frames: int = 200_000_000
     """Training budget in environment frames (all worlds together)."""
     checkpoint_every: int = 50
     """Write ``checkpoint.pt`` every this many iterations (and always at the end or on Ctrl-C)."""
+    eval_every: int = 0
+    """Every this many iterations, run ``eval_trials`` frame-0 trials of the quick protocol with the current policy
+    and log ``eval/success_rate`` (0: never)."""
+    eval_trials: int = 32
+    """Trials of each periodic evaluation (their frames do not count toward ``max_frames``)."""
 
     def __post_init__(self) -> None:
         batch = self.num_envs * self.horizon
+        if self.schedule not in SCHEDULES:
+            raise InputError(
+                None, "ppo.schedule", f"unknown schedule {self.schedule!r}", f"one of {', '.join(SCHEDULES)}"
+            )
         if min(self.num_envs, self.horizon, self.minibatch_size, self.epochs, self.checkpoint_every) < 1:
             raise InputError(None, "ppo", "num_envs, horizon, minibatch_size, epochs, checkpoint_every must be >= 1")
         if batch % self.minibatch_size:
@@ -79,26 +111,66 @@ class PPOConfig:
 
     @property
     def sigma(self) -> float:
+        """The initial (or fixed) sigma."""
         return math.exp(self.log_std)
+
+    @property
+    def min_log_std(self) -> float:
+        return math.log(self.min_std) if self.min_std > 0 else -20.0
 
 
 PRESETS: dict[str, PPOConfig] = {
     # InterMimic's values at the paper's scale (2,048 worlds instead of InterMimic's 4,096; 8 minibatches).
     "paper": PPOConfig(),
-    # A 2-core machine steps ~1k frames/s: 64 worlds x 32 steps is a ~2 s rollout, so updates come often; 4
-    # minibatches of 512 and a smaller MLP keep the update well below the rollout time. lr 1e-4, measured on the
-    # first 30 frames of sub2_largetable_000 (61k frames, 30 iterations, seed 0): mean reward 0.09 -> 0.27 at
-    # 2e-5, -> 0.33 at 1e-4 and -> 0.33 at 3e-4; 1e-4 clips 80 % of the samples per update, 3e-4 92 %.
+    # The recommended CPU recipe (2 cores, ~1k frames/s). 64 worlds x 32 steps is a ~2 s rollout. With 153 action
+    # dimensions and 1,707 observations, InterMimic's fixed lr and 6 epochs x 4 minibatches left the trust region
+    # on every update (approx KL 1e5-1e14, clip fraction 0.8-0.9); measured on synth_default (40,960 frames,
+    # residual actions): 5 epochs x 4 minibatches needed the adaptive lr to fall to 1.1e-6 to hold KL (median 0.017),
+    # 2 epochs x 2 minibatches held a median KL of 0.02-0.03 and clip fraction 0.2 at lr ~1e-4, and the update
+    # costs a fifth as much. Sigma is learned (rsl_rl) from 0.2 (0.1 rad on a body hinge at residual_scale 0.5),
+    # with a clipped value loss, and 32 frame-0 trials of the quick protocol every 20 iterations.
     "cpu": PPOConfig(
         num_envs=64,
-        minibatch_size=512,
+        minibatch_size=1024,
+        epochs=2,
         learning_rate=1e-4,
+        schedule="adaptive",
+        learn_std=True,
+        log_std=math.log(0.2),
+        min_std=0.02,
+        clip_value_loss=True,
         actor_hidden=(512, 256),
         critic_hidden=(512, 256),
         max_frames=5_000_000,
         checkpoint_every=20,
+        eval_every=20,
+        eval_trials=32,
     ),
 }
+
+PRESET_ENV: dict[str, dict[str, Any]] = {
+    # the paper's (InterMimic's) environment: absolute PD targets, uniform reference state initialisation and no
+    # object curriculum; the CPU recipe uses EnvConfig's defaults (residual actions, failure-weighted starts,
+    # virtual object controller)
+    "paper": {
+        "action_mode": "absolute",
+        "velocity_feedforward": False,
+        "starts": {"adaptive": False},
+        "object_controller": {"enabled": False},
+    },
+    "cpu": {},
+}
+"""Environment fields each preset sets (on top of the variant's), as plain values."""
+
+
+def preset_env(name: str, variant: str) -> Any:
+    """The environment config of ``variant`` under preset ``name`` (``EnvConfig``)."""
+    from wristmimic.env.config import env_config_from_dict, variant_config
+
+    if name not in PRESETS:
+        raise InputError(None, "preset", f"unknown preset {name!r}", f"one of {', '.join(PRESETS)}")
+    base = to_jsonable(variant_config(variant))
+    return env_config_from_dict({**base, **PRESET_ENV.get(name, {})})
 
 
 def preset(name: str, **overrides: Any) -> PPOConfig:

@@ -26,8 +26,10 @@ class EpisodeStats:
     """Accumulates one iteration's step and episode statistics over all worlds.
 
     Attributes:
-        num_frames: frames of the reference; an episode whose last frame is ``num_frames - 1`` succeeded.
-        episodes_total, successes_total: counts since the start of training (kept in checkpoints).
+        num_frames: frames of the reference. An episode succeeded when it started at frame 0 and reached frame
+            ``num_frames - 1`` unterminated; ``success_rate`` is over the episodes from frame 0 that ended.
+        episodes_total, successes_total: frame-0 episodes ended and succeeded since the start of training
+            (kept in checkpoints).
     """
 
     def __init__(self, num_frames: int):
@@ -47,7 +49,8 @@ class EpisodeStats:
         the environment's device until :meth:`flush`."""
         self._steps += 1
         done = terminated | info["time_outs"]
-        success = info["time_outs"] & (info["frame"] >= self.num_frames - 1)
+        from_zero = done & (info["episode_start"] == 0)
+        success = from_zero & info["time_outs"] & (info["frame"] >= self.num_frames - 1)
         terms = {k: v for k, v in info["terms"].items() if k.startswith("reward/")}
         if self._codes is None or self._codes.device != reward.device:  # made once: no host-to-device copy per step
             self._codes = torch.tensor(_REASON_CODES, device=reward.device)
@@ -57,34 +60,36 @@ class EpisodeStats:
             reward.double().mean(),
             (info["episode_frames"] * done).sum().double(),
             done.sum().double(),
+            from_zero.sum().double(),
             success.sum().double(),
             *(v.double().mean() for v in terms.values()),
         ]
         row = torch.cat([torch.stack(values), by_reason.double()])
         if self._sums is None:
-            self._names = ["reward", "length_sum", "episodes", "success", *terms]
+            self._names = ["reward", "length_sum", "episodes", "from_zero", "success", *terms]
             self._sums = row
         else:
             self._sums = self._sums + row
 
     def flush(self) -> dict[str, float]:
         """This iteration's means (NaN where no episode ended), then start a new iteration."""
-        names = self._names or ["reward", "length_sum", "episodes", "success"]
+        names = self._names or ["reward", "length_sum", "episodes", "from_zero", "success"]
         sums = self._sums.cpu().tolist() if self._sums is not None else [0.0] * (len(names) + len(_REASON_CODES))
         named, reasons = dict(zip(names, sums, strict=False)), sums[len(names) :]
         steps = max(self._steps, 1)
-        n = int(named["episodes"])
+        n, n0 = int(named["episodes"]), int(named["from_zero"])
         success = int(named["success"])
         self.successes_total += success
-        self.episodes_total += n
+        self.episodes_total += n0
         row = {
             "reward_mean": named["reward"] / steps,
             "episode_length_mean": named["length_sum"] / n if n else math.nan,
             "episodes": n,
-            "success_rate": success / n if n else math.nan,
+            "episodes_from_zero": n0,
+            "success_rate": success / n0 if n0 else math.nan,
             "success_rate_total": self.successes_total / self.episodes_total if self.episodes_total else math.nan,
         }
-        row.update({name: named[name] / steps for name in sorted(names[4:])})
+        row.update({name: named[name] / steps for name in sorted(names[5:])})
         row.update({f"termination/{REASONS[c]}": int(v) for c, v in zip(_REASON_CODES, reasons, strict=True)})
         self._reset_iteration()
         return row

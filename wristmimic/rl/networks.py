@@ -55,7 +55,8 @@ def _init(layer: nn.Linear, gain: float) -> nn.Linear:
 
 
 class ActorCritic(nn.Module):
-    """Gaussian policy pi(a | s) = N(actor(s), sigma^2) with a fixed sigma, and a separate critic V(s).
+    """Gaussian policy pi(a | s) = N(actor(s), sigma^2), sigma fixed or learned (state-independent), and a
+    separate critic V(s).
 
     Both networks read normalised observations; :attr:`normalizer` does that and is updated by the runner.
     """
@@ -68,13 +69,35 @@ class ActorCritic(nn.Module):
         critic_hidden: Sequence[int],
         log_std: float,
         obs_clip: float = 5.0,
+        learn_std: bool = False,
+        min_log_std: float = -20.0,
     ):
         super().__init__()
         self.obs_size, self.action_size = int(obs_size), int(action_size)
         self.normalizer = ObsNormalizer(obs_size, obs_clip)
         self.actor = mlp(obs_size, actor_hidden, action_size, out_gain=0.01)  # mu ~ 0 at the start
         self.critic = mlp(obs_size, critic_hidden, 1, out_gain=1.0)
-        self.register_buffer("log_std", torch.full((action_size,), float(log_std)))  # fixed: a buffer, not learned
+        self.min_log_std = float(min_log_std)
+        init = torch.full((action_size,), float(log_std))
+        if learn_std:  # state-independent, learned (rsl_rl); floored by min_log_std when used
+            self.log_std_param = nn.Parameter(init)
+        else:  # fixed (InterMimic): a buffer, not learned
+            self.register_buffer("log_std_param", init)
+
+    @property
+    def log_std(self) -> torch.Tensor:
+        """(A,) log sigma in use: the stored value, floored at ``min_log_std``."""
+        return self.log_std_param.clamp_min(self.min_log_std)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):  # type: ignore[no-untyped-def]
+        old = prefix + "log_std"  # checkpoints from before the learned sigma stored the buffer as 'log_std'
+        if old in state_dict:
+            state_dict[prefix + "log_std_param"] = state_dict.pop(old)
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+
+    def entropy(self) -> torch.Tensor:
+        """Entropy of the Gaussian per sample (sum over action dimensions)."""
+        return (self.log_std + 0.5 * math.log(2 * math.pi * math.e)).sum()
 
     def value(self, obs_n: torch.Tensor) -> torch.Tensor:
         """V(s) of normalised observations ``(N, O)`` -> ``(N,)``."""

@@ -43,7 +43,7 @@ class Policy:
     def act(
         self, obs: torch.Tensor, deterministic: bool = True, generator: torch.Generator | None = None
     ) -> torch.Tensor:
-        """Actions for raw observations: the mean, or a sample with the policy's fixed sigma."""
+        """Actions for raw observations: the mean, or a sample with the policy's sigma."""
         if obs.shape[-1] != self.net.obs_size:
             raise InputError(None, "obs", f"{obs.shape[-1]} features", f"{self.net.obs_size} (the training scene's)")
         mu = self.net.actor(self.net.normalizer(obs))
@@ -63,8 +63,18 @@ def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
     config = json.loads(state["config"])
     ppo = from_jsonable(PPOConfig, config["ppo"])
     weights = state["policy"]
-    obs_size, action_size = weights["normalizer.mean"].shape[0], weights["log_std"].shape[0]
-    net = ActorCritic(obs_size, action_size, ppo.actor_hidden, ppo.critic_hidden, ppo.log_std, ppo.obs_clip)
+    std_key = "log_std_param" if "log_std_param" in weights else "log_std"  # older checkpoints: 'log_std'
+    obs_size, action_size = weights["normalizer.mean"].shape[0], weights[std_key].shape[0]
+    net = ActorCritic(
+        obs_size,
+        action_size,
+        ppo.actor_hidden,
+        ppo.critic_hidden,
+        ppo.log_std,
+        ppo.obs_clip,
+        ppo.learn_std,
+        ppo.min_log_std,
+    )
     net.load_state_dict(weights)
     net.eval()
     meta = state["metadata"]

@@ -48,8 +48,31 @@ class PPO:
 
     def __init__(self, policy: ActorCritic, cfg: PPOConfig):
         self.policy, self.cfg = policy, cfg
-        params = [*policy.actor.parameters(), *policy.critic.parameters()]
-        self.optimizer = torch.optim.Adam(params, lr=cfg.learning_rate)
+        actor = [*policy.actor.parameters()]
+        if isinstance(policy.log_std_param, nn.Parameter):
+            actor.append(policy.log_std_param)
+        critic = [*policy.critic.parameters()]
+        if cfg.critic_learning_rate is None:
+            groups = [{"params": actor + critic}]
+        else:  # the critic keeps its own fixed rate; the schedule moves the actor's group only
+            groups = [{"params": actor}, {"params": critic, "lr": cfg.critic_learning_rate}]
+        self.optimizer = torch.optim.Adam(groups, lr=cfg.learning_rate)
+
+    @property
+    def learning_rate(self) -> float:
+        return float(self.optimizer.param_groups[0]["lr"])
+
+    def _adapt_learning_rate(self, kl: float) -> None:
+        """rsl_rl's adaptive schedule: lr / 1.5 above 2 x desired KL, x 1.5 below half of it, clamped."""
+        c, lr = self.cfg, self.learning_rate
+        if kl > 2.0 * c.desired_kl:
+            lr = max(c.lr_min, lr / 1.5)
+        elif kl < 0.5 * c.desired_kl:
+            lr = min(c.lr_max, lr * 1.5)
+        self.optimizer.param_groups[0]["lr"] = lr
+        if c.critic_learning_rate is None:  # one group holds actor and critic
+            for group in self.optimizer.param_groups:
+                group["lr"] = lr
 
     def compute_returns(self, storage: RolloutStorage, last_values: torch.Tensor) -> None:
         adv, ret = compute_gae(
@@ -75,10 +98,19 @@ class PPO:
             mu = pi.actor(mb["observations"])
             log_ratio = pi.log_prob(mu, mb["actions"]) - mb["log_probs"]
             ratio = log_ratio.exp()
+            kl = ((ratio - 1) - log_ratio).mean()  # k3 estimator of KL(old || new)
+            if c.schedule == "adaptive":  # one host sync per minibatch: the step size depends on it
+                self._adapt_learning_rate(float(kl.detach()))
             policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - c.clip, 1 + c.clip)).mean()
-            value_loss = 0.5 * (pi.value(mb["observations"]) - mb["returns"]).square().mean()
+            v = pi.value(mb["observations"])
+            value_loss = 0.5 * (v - mb["returns"]).square()
+            if c.clip_value_loss:
+                v_clipped = mb["values"] + (v - mb["values"]).clamp(-c.clip, c.clip)
+                value_loss = torch.max(value_loss, 0.5 * (v_clipped - mb["returns"]).square())
+            value_loss = value_loss.mean()
             b_loss = bounds_loss(mu, c.action_bound)
-            loss = policy_loss + c.value_coef * value_loss + c.bounds_loss_coef * b_loss
+            entropy = pi.entropy()
+            loss = policy_loss + c.value_coef * value_loss + c.bounds_loss_coef * b_loss - c.entropy_coef * entropy
             self.optimizer.zero_grad()
             loss.backward()
             actor_norm = nn.utils.clip_grad_norm_(pi.actor.parameters(), c.max_grad_norm)
@@ -90,7 +122,7 @@ class PPO:
                     "loss/value": value_loss,
                     "loss/bounds": b_loss,
                     "loss/total": loss,
-                    "loss/approx_kl": ((ratio - 1) - log_ratio).mean(),  # k3 estimator of KL(old || new)
+                    "loss/approx_kl": kl,
                     "loss/clip_fraction": ((ratio - 1).abs() > c.clip).float().mean(),
                     "loss/grad_norm_actor": actor_norm,
                     "loss/grad_norm_critic": critic_norm,
@@ -99,4 +131,7 @@ class PPO:
                 sums[k] = sums[k] + v.detach() if k in sums else v.detach()
             n += 1
         values = torch.stack([v.double() for v in sums.values()]).cpu().tolist()  # one host sync per update
-        return {k: v / n for k, v in zip(sums, values, strict=True)}
+        out = {k: v / n for k, v in zip(sums, values, strict=True)}
+        out["loss/learning_rate"] = self.learning_rate
+        out["loss/sigma"] = float(torch.exp(pi.log_std.detach()).mean())
+        return out

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import signal
 import threading
 import time
@@ -10,11 +12,13 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.rl.checkpoint import CHECKPOINT_NAME, rng_state, save_checkpoint, set_rng_state
 from wristmimic.rl.config import PPOConfig
+from wristmimic.rl.curriculum import ObjectCurriculum
 from wristmimic.rl.logger import EpisodeStats, MetricsCsv, train_progress
 from wristmimic.rl.networks import ActorCritic
 from wristmimic.rl.ppo import PPO
@@ -28,20 +32,42 @@ class Runner:
     in every checkpoint so that a policy can be loaded from the checkpoint alone.
     """
 
-    def __init__(self, env: WristMimicEnv, cfg: PPOConfig, seed: int, run_dir: Path, config_text: str, metadata: dict):
+    def __init__(
+        self,
+        env: WristMimicEnv,
+        cfg: PPOConfig,
+        seed: int,
+        run_dir: Path,
+        config_text: str,
+        metadata: dict,
+        dataset_file: Path | None = None,
+    ):
         self.env, self.cfg, self.run_dir = env, cfg, Path(run_dir)
         self.config_text, self.metadata = config_text, metadata
+        self.dataset_file = dataset_file
         torch.manual_seed(seed)  # network initialisation (on the CPU, then moved: the same weights on any device)
         dev = env.device
         self.gen = torch.Generator(device=dev).manual_seed(seed)  # action noise and minibatch order
         self.obs, _ = env.reset(seed=seed)
         self.policy = ActorCritic(
-            env.observation_size, env.action_size, cfg.actor_hidden, cfg.critic_hidden, cfg.log_std, cfg.obs_clip
+            env.observation_size,
+            env.action_size,
+            cfg.actor_hidden,
+            cfg.critic_hidden,
+            cfg.log_std,
+            cfg.obs_clip,
+            cfg.learn_std,
+            cfg.min_log_std,
         ).to(dev)
         self.alg = PPO(self.policy, cfg)
         self.storage = RolloutStorage(cfg.horizon, cfg.num_envs, env.observation_size, env.action_size, dev)
         self.stats = EpisodeStats(env.ref.num_frames)
         self.iteration, self.frames, self.seconds = 0, 0, 0.0
+        self.curriculum = ObjectCurriculum(env.cfg.object_controller, env.ref.num_frames)
+        if self.curriculum.gain > 0 and not env.has_object_controller:
+            raise ValueError("the object curriculum needs a training scene with SceneConfig(object_actuators=True)")
+        env.object_gain = self.curriculum.gain
+        self._eval_env: WristMimicEnv | None = None
         self.stop_requested = False
         self.metrics: MetricsCsv | None = None
 
@@ -53,15 +79,21 @@ class Runner:
         with stop_on_ctrl_c(self), train_progress(desc, self.frames, max_frames, progress) as bar:
             while self.frames < max_frames and not self.stop_requested:
                 t0 = time.perf_counter()
+                gain = self.env.object_gain
                 episode_row = self.collect()
                 losses = self.alg.update(self.storage, self.gen)
                 self.storage.clear()
                 dt = time.perf_counter() - t0
                 self.iteration += 1
                 self.frames += self.cfg.batch_size
-                self.seconds += dt
+                terminations = sum(v for k, v in episode_row.items() if k.startswith("termination/"))
+                self.env.object_gain = self.curriculum.update(terminations, self.cfg.batch_size, self.frames)
+                evaluation = self.periodic_eval() if self._eval_due() else {}
+                self.seconds += time.perf_counter() - t0
                 row = {"iteration": self.iteration, "frames": self.frames, "seconds": self.seconds}
                 row |= {"frames_per_s": self.cfg.batch_size / dt, **episode_row, **losses}
+                row["curriculum/object_gain"] = gain
+                row |= {k: evaluation.get(k, math.nan) for k in EVAL_COLUMNS}
                 self.metrics.write(row)
                 bar.update(self.frames, row)
                 if self.iteration % self.cfg.checkpoint_every == 0:
@@ -86,6 +118,42 @@ class Runner:
         self.alg.compute_returns(self.storage, last_values)
         return self.stats.flush()
 
+    # -- periodic evaluation -------------------------------------------------------------------------------
+    def _eval_due(self) -> bool:
+        """Every ``eval_every`` iterations (not at the end of a call: a run split by a resume logs the same rows)."""
+        every = self.cfg.eval_every
+        return every > 0 and self.iteration % every == 0
+
+    def periodic_eval(self) -> dict[str, float]:
+        """``eval_trials`` frame-0 trials of the quick protocol with the current policy, exactly as
+        ``wristmimic evaluate`` runs them (seeded action noise, the run's terminations, no object controller):
+        ``eval/success_rate``, ``eval/frames_completed`` (mean), ``eval/obj_pos_err_cm``, ``eval/contact_ratio``."""
+        from wristmimic.evaluate.protocol import load_protocol
+        from wristmimic.evaluate.trials import TrialSettings, make_env, run_trials
+
+        config = json.loads(self.config_text)
+        if self._eval_env is None:
+            meta = {k: config.get(k) for k in ("scene", "env", "scene_config", "ref_frames")}
+            meta["dataset"] = str(self.dataset_file or config["dataset"]["path"])
+            n = min(self.cfg.eval_trials, self.env.num_worlds)
+            physics = config.get("physics") or {}
+            self._eval_env = make_env(
+                meta, n, nthread=getattr(self.env.backend, "nthread", None), backend=physics.get("backend", "cpu")
+            )
+        records: list[dict[str, np.ndarray]] = []
+        settings = TrialSettings.from_protocol(load_protocol("quick"))
+        run_trials(self._eval_env, _TrainingPolicy(self.policy), settings, 0, self.cfg.eval_trials, records.append)
+        col = {
+            k: np.concatenate([r[k] for r in records])
+            for k in ("success", "frames_completed", "obj_pos_err_cm", "contact_ratio")
+        }
+        return {
+            "eval/success_rate": float(col["success"].mean()),
+            "eval/frames_completed": float(col["frames_completed"].mean()),
+            "eval/obj_pos_err_cm": float(np.nanmean(col["obj_pos_err_cm"])),
+            "eval/contact_ratio": float(np.nanmean(col["contact_ratio"])),
+        }
+
     # -- checkpoints ---------------------------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
         """Everything a bit-for-bit resume needs; only tensors, plain containers and JSON text."""
@@ -99,9 +167,16 @@ class Runner:
             "env": self.env.state_dict(),
             "obs": self.obs.clone(),
             "episodes": self.stats.state_dict(),
+            "curriculum": self.curriculum.state_dict(),
             "storage_step": self.storage.step,
             "config": self.config_text,
-            "metadata": dict(self.metadata, iteration=self.iteration, frames=self.frames),
+            "metadata": dict(
+                self.metadata,
+                iteration=self.iteration,
+                frames=self.frames,
+                object_gain=self.curriculum.gain,
+                object_gain_zero_frames=self.curriculum.zero_frames,
+            ),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -112,6 +187,11 @@ class Runner:
         self.env.load_state_dict(state["env"])
         self.obs = state["obs"].to(self.env.device)
         self.stats.load_state_dict(state["episodes"])
+        if "curriculum" in state:  # runs from before the curriculum: none
+            self.curriculum.load_state_dict(state["curriculum"])
+        else:
+            self.curriculum.gain = 0.0
+        self.env.object_gain = self.curriculum.gain
         self.storage.step = int(state["storage_step"])
         self.metrics = MetricsCsv(self.run_dir / "metrics.csv", keep_until=self.iteration)
 
@@ -119,6 +199,27 @@ class Runner:
         path = self.run_dir / CHECKPOINT_NAME
         save_checkpoint(path, self.state_dict())
         return path
+
+
+EVAL_COLUMNS = ("eval/success_rate", "eval/frames_completed", "eval/obj_pos_err_cm", "eval/contact_ratio")
+"""Columns of the periodic evaluation in ``metrics.csv`` (NaN in iterations without one)."""
+
+
+class _TrainingPolicy:
+    """The policy being trained behind :class:`wristmimic.evaluate.policy.EvalPolicy`."""
+
+    metadata: dict[str, Any] = {}
+
+    def __init__(self, net: ActorCritic):
+        self.net = net
+
+    @torch.no_grad()
+    def act(self, obs: torch.Tensor, deterministic: bool = True) -> torch.Tensor:
+        return self.net.actor(self.net.normalizer(obs))
+
+    @property
+    def sigma(self) -> torch.Tensor:
+        return torch.exp(self.net.log_std.detach().to(torch.float32))
 
 
 @contextlib.contextmanager

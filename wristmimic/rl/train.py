@@ -8,17 +8,17 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import wristmimic
-from wristmimic.env.config import VARIANTS, EnvConfig, variant_config
+from wristmimic.env.config import VARIANTS, EnvConfig, env_config_from_dict
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.rl.checkpoint import load_checkpoint
-from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, to_jsonable
+from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, preset_env, to_jsonable
 from wristmimic.rl.runner import Runner
 from wristmimic.safe_io import atomic_output, sha256_file
 from wristmimic.scene import SceneConfig
@@ -41,7 +41,7 @@ class TrainSpec:
     """Name of the PPO preset the config started from."""
     ppo: PPOConfig = field(default_factory=lambda: preset("cpu"))
     env: EnvConfig | None = None
-    """Environment config; None: ``variant_config(variant)``."""
+    """Environment config; None: the variant's under the preset (:func:`wristmimic.rl.config.preset_env`)."""
     scene_config: SceneConfig = field(default_factory=SceneConfig)
     ref_frames: int | None = None
     """Keep only the first frames of the reference (a short task); None: the whole sequence."""
@@ -105,7 +105,10 @@ def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any
 
 def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_file: Path | None = None) -> Runner:
     ppo = from_jsonable(PPOConfig, config["ppo"])
-    env_cfg = from_jsonable(EnvConfig, config["env"])
+    env_cfg = env_config_from_dict(config["env"])
+    scene_cfg = from_jsonable(SceneConfig, config["scene_config"])
+    # the training scene alone carries the virtual object controller's motors (config.json records the user's)
+    scene_cfg = replace(scene_cfg, object_actuators=env_cfg.object_controller.enabled)
     physics = config.get("physics") or {"backend": "cpu"}  # runs from before backends existed: CPU
     options = {"device": physics["device"]} if physics["backend"] == "warp" and physics.get("device") else None
     env = WristMimicEnv.from_file(
@@ -113,7 +116,7 @@ def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_f
         config["scene"],
         num_worlds=ppo.num_envs,
         config=env_cfg,
-        scene_config=from_jsonable(SceneConfig, config["scene_config"]),
+        scene_config=scene_cfg,
         seed=config["seed"],
         nthread=nthread,
         max_frames=config["ref_frames"],
@@ -126,7 +129,9 @@ def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_f
         "dataset_sha256": config["dataset"]["sha256"],
         "seed": config["seed"],
     }
-    return Runner(env, ppo, config["seed"], run_dir, dumps(config), meta)
+    return Runner(
+        env, ppo, config["seed"], run_dir, dumps(config), meta, Path(dataset_file or config["dataset"]["path"])
+    )
 
 
 def _check_scene(dataset: Path, scene: str) -> None:
@@ -156,7 +161,7 @@ def start_run(
         raise InputError(None, "variant", f"unknown variant {spec.variant!r}", f"one of {', '.join(VARIANTS)}")
     if spec.backend not in BACKENDS:
         raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
-    env_cfg = spec.env or variant_config(spec.variant)
+    env_cfg = spec.env or preset_env(spec.preset, spec.variant)
     config = _config_dict(spec, env_cfg, sha256_file(data))
     run_dir.mkdir(parents=True, exist_ok=True)
     with atomic_output(run_dir / "config.json") as tmp:

@@ -40,14 +40,13 @@ class RunViewOptions:
 
 def record_run(run_dir_or_checkpoint: str | Path, out: str | Path, options: RunViewOptions) -> RecordingSummary:
     """One rollout of a trained policy from ``options.start_frame``, recorded beside its reference."""
-    from wristmimic.env.config import EnvConfig
+    from wristmimic.env.config import env_config_from_dict
     from wristmimic.evaluate.policy import load_eval_policy
-    from wristmimic.rl.config import from_jsonable
 
     policy = load_eval_policy(run_dir_or_checkpoint)
     meta = policy.metadata
     if options.reference_only:
-        window = from_jsonable(EnvConfig, meta["env"]).window
+        window = env_config_from_dict(meta["env"]).window
         path = run_dataset(meta, options.dataset)
         return record_reference(
             path, meta["scene"], out, hulls=options.hulls, window=window, max_frames=meta.get("ref_frames")

@@ -1,0 +1,107 @@
+"""Action spaces: residual targets around the reference of the frame being stepped to (fingers absolute),
+InterMimic's absolute mapping, legacy run configs, and the same mapping in training, evaluation and view."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from wristmimic.convert.common import ConvertOptions
+from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.env.config import EnvConfig, env_config_from_dict, variant_config
+from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.evaluate.trials import make_env
+from wristmimic.rl import TrainSpec, preset, start_run
+from wristmimic.rl.config import to_jsonable
+from wristmimic.view.rollout import env_for_policy
+
+from synthetic import write_intermimic_folder
+
+SID = "sub1_box_000"
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("actions")
+    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
+    convert_intermimic(write_intermimic_folder(tmp / "im", T=30), tmp / "im.h5", options=opts)
+    return tmp / "im.h5"
+
+
+def _env(dataset: Path, **kw) -> WristMimicEnv:
+    env = WristMimicEnv.from_file(dataset, SID, 3, variant_config("wristmimic", **kw), seed=0)
+    env.reset(start_frames=torch.tensor([0, 5, 11]))
+    return env
+
+
+def test_residual_zero_action_targets_the_next_reference_frame_and_fingers_stay_absolute(dataset: Path) -> None:
+    env = _env(dataset, velocity_feedforward=False)
+    fingers = ~env.residual_hinges.numpy()
+    assert fingers.sum() == 3 * len(env.scene.humanoid.roles["fingers"]) > 0
+    a = torch.zeros(3, env.action_size)
+    ctrl = env.action_to_ctrl(a).numpy()
+    ref = env.ref.joint_angles[torch.tensor([1, 6, 12])].numpy()
+    lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
+    np.testing.assert_allclose(ctrl[:, ~fingers], np.clip(ref, lo, hi)[:, ~fingers], atol=1e-6)
+    absolute = _env(dataset, action_mode="absolute").action_to_ctrl(a).numpy()
+    np.testing.assert_array_equal(ctrl[:, fingers], absolute[:, fingers])  # fingers: the same absolute mapping
+    # one unit of action moves a body hinge by residual_scale (inside its range)
+    one = env.action_to_ctrl(torch.full((3, env.action_size), 0.1)).numpy() - ctrl
+    inside = (ref + 0.1 * env.cfg.residual_scale < hi) & (ref > lo)
+    np.testing.assert_allclose(one[:, ~fingers][inside[:, ~fingers]], 0.1 * env.cfg.residual_scale, atol=1e-5)
+
+
+def test_velocity_feedforward_adds_kv_over_kp_times_the_reference_velocity(dataset: Path) -> None:
+    with_ff, without = _env(dataset), _env(dataset, velocity_feedforward=False)
+    a = torch.zeros(3, with_ff.action_size)
+    diff = (with_ff.action_to_ctrl(a) - without.action_to_ctrl(a)).numpy()
+    body = with_ff.residual_hinges.numpy()
+    vel = with_ff.ref.joint_vel[torch.tensor([1, 6, 12])].numpy()
+    kp, kv = with_ff.scene.gains[:, 0], with_ff.scene.gains[:, 1]
+    free = (np.abs(without.action_to_ctrl(a).numpy()) < 1.0) & body  # away from range clipping
+    np.testing.assert_allclose(diff[free], (kv / kp * vel)[free], atol=1e-5)
+
+
+def test_absolute_mode_is_intermimic_mapping_and_unknown_modes_are_refused(dataset: Path) -> None:
+    env = _env(dataset, action_mode="absolute")
+    assert not env.residual_hinges.any()
+    lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
+    ctrl = env.action_to_ctrl(torch.zeros(1, env.action_size)).numpy()[0]
+    mid = (lo + hi) / 2
+    np.testing.assert_allclose(ctrl, np.where(np.abs(mid) > 0.1, 0.0, mid), atol=1e-6)
+    with pytest.raises(ValueError, match="action_mode"):
+        _env(dataset, action_mode="delta")
+
+
+def test_runs_recorded_before_action_modes_read_as_absolute() -> None:
+    old = to_jsonable(EnvConfig())
+    for key in ("action_mode", "velocity_feedforward", "residual_scale", "object_controller", "starts"):
+        old.pop(key)
+    cfg = env_config_from_dict(old)
+    assert cfg.action_mode == "absolute" and not cfg.object_controller.enabled and not cfg.starts.adaptive
+    assert env_config_from_dict(to_jsonable(EnvConfig())) == EnvConfig()
+
+
+@pytest.mark.parametrize("mode", ["residual", "absolute"])
+def test_train_evaluate_and_view_map_actions_the_same_way(dataset: Path, tmp_path: Path, mode: str) -> None:
+    from wristmimic.evaluate.policy import load_eval_policy
+
+    env_cfg = variant_config("wristmimic", action_mode=mode)
+    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32), env=env_cfg)
+    start_run(spec, tmp_path / "run", progress=False)
+    policy = load_eval_policy(tmp_path / "run")
+    train_env = WristMimicEnv.from_file(dataset, SID, 2, env_cfg)
+    eval_env = make_env(policy.metadata, 2)
+    view_env = env_for_policy(policy, None, None)
+    a = torch.linspace(-1, 1, 2 * train_env.action_size).reshape(2, -1)
+    frames = torch.tensor([3, 17])
+    want = train_env.action_to_ctrl(a, frames)
+    for env in (eval_env, view_env):
+        assert env.cfg.action_mode == mode
+        assert not env.has_object_controller  # the training-only object controller never reaches them
+        torch.testing.assert_close(env.action_to_ctrl(a, frames), want, rtol=0, atol=0)

@@ -1,0 +1,101 @@
+"""The training-only object curriculum: the virtual object controller's wrench, its gain schedule down to exactly
+zero, its log column, and evaluation that never applies it."""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+
+from wristmimic.convert.common import ConvertOptions
+from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.env.config import ObjectControllerConfig, variant_config
+from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.evaluate.policy import load_eval_policy
+from wristmimic.evaluate.trials import make_env
+from wristmimic.rl import TrainSpec, preset, start_run
+from wristmimic.rl.checkpoint import load_checkpoint
+from wristmimic.rl.curriculum import ObjectCurriculum
+from wristmimic.scene import SceneConfig
+
+from synthetic import write_intermimic_folder
+
+SID = "sub1_box_000"
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("curriculum")
+    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
+    convert_intermimic(write_intermimic_folder(tmp / "im", T=40), tmp / "im.h5", options=opts)
+    return tmp / "im.h5"
+
+
+def _object_error_after(dataset: Path, gain: float, steps: int = 25) -> float:
+    """Mean object position error after ``steps`` steps from frame 0 with zero actions (humanoid tracking)."""
+    cfg = variant_config("wristmimic", wrist_resets=False)
+    cfg = replace(cfg, termination=replace(cfg.termination, body_error=9.0, object_error=9.0, contact_lost_frames=999))
+    env = WristMimicEnv.from_file(dataset, SID, 2, cfg, SceneConfig(object_actuators=True), seed=0)
+    env.object_gain = gain
+    env.reset(start_frames=torch.zeros(2, dtype=torch.long))
+    err = 0.0
+    for _ in range(steps):
+        *_, info = env.step(torch.zeros(2, env.action_size))
+        err = float(info["eval"]["obj_pos"].mean())
+    return err
+
+
+def test_the_object_controller_carries_the_object_along_its_reference(dataset: Path) -> None:
+    held, free = _object_error_after(dataset, 1.0), _object_error_after(dataset, 0.0)
+    assert held < 0.03 < free, (held, free)  # with no hand carrying it the object falls or stays behind
+
+
+def test_a_positive_gain_needs_the_controller_motors(dataset: Path) -> None:
+    env = WristMimicEnv.from_file(dataset, SID, 1, variant_config("wristmimic"), seed=0)
+    assert not env.has_object_controller and env.scene.model.nu == env.action_size
+    env.reset()
+    env.object_gain = 0.5
+    with pytest.raises(RuntimeError, match="object_actuators"):
+        env.step(torch.zeros(1, env.action_size))
+
+
+def test_gain_decays_on_survival_and_reaches_exactly_zero_by_the_frame_cap() -> None:
+    cfg = ObjectControllerConfig(decay=0.5, survival=0.5, min_gain=0.1, zero_by_frames=500)
+    cur = ObjectCurriculum(cfg, num_frames=101)
+    assert cur.gain == 1.0
+    assert cur.update(terminations=50, world_steps=100, frames=10) == pytest.approx(0.98)  # cap only
+    assert cur.update(terminations=0, world_steps=100, frames=20) == pytest.approx(0.5)  # decay
+    assert cur.update(terminations=0, world_steps=100, frames=30) == pytest.approx(0.25)
+    assert cur.zero_frames is None
+    assert cur.update(terminations=0, world_steps=100, frames=40) == pytest.approx(0.125)
+    assert cur.update(terminations=0, world_steps=100, frames=50) == 0.0  # 0.0625 < min_gain
+    assert cur.zero_frames == 50
+    assert cur.update(terminations=100, world_steps=100, frames=60) == 0.0  # zero stays zero
+    late = ObjectCurriculum(cfg, 101)
+    for frames in range(100, 501, 100):  # never survives: the cap alone takes it to zero by zero_by_frames
+        g = late.update(terminations=100, world_steps=100, frames=frames)
+    assert g == 0.0 and late.zero_frames is not None and late.zero_frames <= 500
+    assert ObjectCurriculum(replace(cfg, enabled=False), 101).gain == 0.0
+
+
+def test_training_logs_the_gain_records_when_it_reached_zero_and_evaluation_never_applies_it(
+    dataset: Path, tmp_path: Path
+) -> None:
+    oc = ObjectControllerConfig(zero_by_frames=32 * 3)
+    env_cfg = variant_config("wristmimic", object_controller=oc)
+    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 6), env=env_cfg)
+    start_run(spec, tmp_path / "run", progress=False)
+    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
+        gains = [float(r["curriculum/object_gain"]) for r in csv.DictReader(f)]
+    assert gains[0] == 1.0 and gains[-1] == 0.0 and gains == sorted(gains, reverse=True)
+    meta = load_checkpoint(tmp_path / "run")["metadata"]
+    assert meta["object_gain"] == 0.0 and 0 < meta["object_gain_zero_frames"] <= 32 * 3
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["env"]["object_controller"]["enabled"] and not config["scene_config"]["object_actuators"]
+    env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
+    assert not env.has_object_controller and env.object_gain == 0.0

@@ -1,0 +1,43 @@
+"""The recommended CPU recipe on the built-in synthetic scene: PPO stays inside its trust region on a short
+real run (the issue's bound: median approx KL <= 0.03 and median clip fraction <= 0.3 over the run)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from wristmimic.rl import TrainSpec, preset, start_run
+from wristmimic.rl.config import preset_env
+from wristmimic.synth.generate import generate
+
+ITERATIONS = 16
+
+
+@pytest.fixture(scope="module")
+def synth(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return generate(tmp_path_factory.mktemp("recipe") / "synth.h5", seed=0, variants=("default",))
+
+
+@pytest.mark.slow
+def test_cpu_recipe_stays_in_its_trust_region(synth: Path, tmp_path: Path) -> None:
+    ppo = replace(preset("cpu"), max_frames=preset("cpu").batch_size * ITERATIONS, eval_every=0)
+    start_run(
+        TrainSpec(synth, "synth_default", "wristmimic", 0, "cpu", ppo), tmp_path / "run", nthread=2, progress=False
+    )
+    m = pd.read_csv(tmp_path / "run" / "metrics.csv")
+    assert len(m) == ITERATIONS
+    kl, clip = m["loss/approx_kl"].median(), m["loss/clip_fraction"].median()
+    assert kl <= 0.03 and clip <= 0.3, (kl, clip)
+    assert m["loss/learning_rate"].between(ppo.lr_min, ppo.lr_max).all()
+    assert (m["loss/sigma"] >= ppo.min_std).all()
+
+
+def test_presets_set_their_environment() -> None:
+    paper, cpu = preset_env("paper", "wristmimic"), preset_env("cpu", "wristmimic")
+    assert paper.action_mode == "absolute" and not paper.object_controller.enabled and not paper.starts.adaptive
+    assert cpu.action_mode == "residual" and cpu.object_controller.enabled and cpu.starts.adaptive
+    assert preset_env("cpu", "intermimic").finger_targets  # the variant's flags stay
+    assert preset("paper").schedule == "fixed" and not preset("paper").learn_std

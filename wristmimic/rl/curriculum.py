@@ -1,0 +1,54 @@
+"""Training curricula: the virtual object controller's gain (DexMachina), lowered to exactly zero.
+
+The gain starts at ``initial_gain``. After every iteration whose episodes would survive a whole clip with
+probability above ``survival`` (projected from the iteration's termination rate per step), it is multiplied by
+``decay``; below ``min_gain`` it becomes 0. A cap ``1 - frames / zero_by_frames`` makes it reach zero after that
+many training frames whatever the episodes do, so the policy always trains its last part, and is always
+evaluated, without help.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from wristmimic.env.config import ObjectControllerConfig
+
+
+class ObjectCurriculum:
+    """The gain of the virtual object controller over training; its state goes into checkpoints."""
+
+    def __init__(self, cfg: ObjectControllerConfig, num_frames: int):
+        self.cfg = cfg
+        self.num_frames = int(num_frames)
+        self.gain = float(cfg.initial_gain) if cfg.enabled else 0.0
+        self._adaptive = self.gain
+        self.zero_frames: int | None = None if self.gain > 0 else 0
+        """Training frames at which the gain first reached zero (None: not yet)."""
+
+    def projected_survival(self, terminations: int, world_steps: int) -> float:
+        """Probability of an episode surviving the whole clip at this iteration's termination rate per step."""
+        hazard = terminations / max(world_steps, 1)
+        return (1.0 - hazard) ** max(self.num_frames - 1, 1)
+
+    def update(self, terminations: int, world_steps: int, frames: int) -> float:
+        """Advance after an iteration (its terminations over ``world_steps`` world steps; ``frames`` trained so
+        far); returns the new gain."""
+        if self.gain == 0.0:
+            return 0.0
+        c = self.cfg
+        if self.projected_survival(terminations, world_steps) > c.survival:
+            self._adaptive *= c.decay
+        cap = 1.0 - frames / max(c.zero_by_frames, 1)
+        gain = min(self._adaptive, cap * c.initial_gain)
+        self.gain = 0.0 if gain < c.min_gain or math.isnan(gain) else gain
+        if self.gain == 0.0:
+            self.zero_frames = frames
+        return self.gain
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"gain": self.gain, "adaptive": self._adaptive, "zero_frames": self.zero_frames}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.gain, self._adaptive = float(state["gain"]), float(state["adaptive"])
+        self.zero_frames = None if state["zero_frames"] is None else int(state["zero_frames"])
