@@ -2,8 +2,10 @@
 
 Usage:  python scripts/learning_curve.py RUN_DIR -o reports/learning_curve_<scene>.png [--smooth 10]
 
-Panels: mean episode length, mean per-step reward and success rate (episodes that reached the end of the
-sequence) against environment frames; faint lines are per-iteration values, bold lines a moving average.
+Panels: mean episode length, mean per-step reward and success rate against environment frames; faint lines are
+per-iteration values, bold lines a moving average. The success panel shows the training success rate (episodes
+that started at frame 0 and reached the last frame) and, as points, the periodic evaluation's
+``eval/success_rate`` (frame-0 trials of the quick protocol, as ``wristmimic evaluate`` runs them).
 """
 
 from __future__ import annotations
@@ -40,6 +42,10 @@ def plot(run_dir: Path, out: Path, smooth: int) -> Path:
         y = m[col].astype(float)
         ax.plot(m["frames"], y, alpha=0.3, lw=0.8)
         ax.plot(m["frames"], y.rolling(smooth, min_periods=1).mean(), lw=2)
+        if col == "success_rate" and "eval/success_rate" in m:
+            ev = m[m["eval/success_rate"].notna()]
+            ax.plot(ev["frames"], ev["eval/success_rate"], "o-", ms=4, label="evaluation (frame-0 trials)")
+            ax.legend(loc="upper left", fontsize=8)
         ax.set_xlabel("environment frames")
         ax.xaxis.set_major_formatter(EngFormatter(sep=""))  # 200k, 1M: no overlapping tick labels
         ax.set_ylabel(label)

@@ -10,8 +10,9 @@ import pytest
 import torch
 
 from wristmimic.env.bodies import BodySets
-from wristmimic.env.config import EnvConfig, variant_config
+from wristmimic.env.config import EnvConfig, RewardWeights, variant_config
 from wristmimic.env.rewards import RewardInputs, arm_weights, compute_reward, error_ig, factor_names
+from wristmimic.env.torch_math import quat_angle
 from wristmimic.humanoid.roles import compute_roles, detect_profile
 from wristmimic.humanoid.skeleton import load_skeleton
 
@@ -162,8 +163,11 @@ def test_object_ig_contact_and_energy_factors() -> None:
     _close(info["reward/contact_energy"], [math.exp(-1e-9 * 530**2), 1.0, math.exp(-1e-9 * 530**2)])
 
 
+PAPER_WEIGHTS = RewardWeights(root_pos=0.0, root_rot=0.0)  # the paper's reward: no root (anchor) factors
+
+
 def test_reward_is_the_product_of_the_logged_factors() -> None:
-    cfg = variant_config("wristmimic")
+    cfg = variant_config("wristmimic", weights=PAPER_WEIGHTS)
     reward, info = compute_reward(toy_inputs(), SETS, cfg)
     names = factor_names(cfg)
     assert {k for k in info if k.startswith("reward/")} == {f"reward/{n}" for n in names}
@@ -175,6 +179,19 @@ def test_reward_is_the_product_of_the_logged_factors() -> None:
     assert reward[1].item() == pytest.approx(w1, rel=1e-5)
     for v in info.values():
         assert v.shape == (N,) and torch.isfinite(v).all()
+
+
+def test_root_factors_track_the_root_body_and_are_off_at_zero_weight() -> None:
+    x = toy_inputs()
+    w = RewardWeights(root_pos=20.0, root_rot=2.0)
+    reward, info = compute_reward(x, SETS, variant_config("wristmimic", weights=w))
+    base, _ = compute_reward(x, SETS, variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    e_pos = (x.ref_body_pos[:, 0] - x.body_pos[:, 0]).square().sum(-1)
+    e_rot = quat_angle(x.ref_body_quat[:, 0], x.body_quat[:, 0])
+    torch.testing.assert_close(info["reward/root_pos"], torch.exp(-20.0 * e_pos))
+    torch.testing.assert_close(info["reward/root_rot"], torch.exp(-2.0 * e_rot))
+    torch.testing.assert_close(reward, base * info["reward/root_pos"] * info["reward/root_rot"])
+    assert "root_pos" not in factor_names(variant_config("wristmimic", weights=PAPER_WEIGHTS))
 
 
 def test_window_modulation_zeroes_exactly_the_grasping_arm() -> None:

@@ -51,7 +51,7 @@ def _object_error_after(dataset: Path, gain: float, steps: int = 25) -> float:
 
 def test_the_object_controller_carries_the_object_along_its_reference(dataset: Path) -> None:
     held, free = _object_error_after(dataset, 1.0), _object_error_after(dataset, 0.0)
-    assert held < 0.03 < free, (held, free)  # with no hand carrying it the object falls or stays behind
+    assert held < 0.05 and free > 10 * held, (held, free)  # with no hand carrying it the object falls behind
 
 
 def test_a_positive_gain_needs_the_controller_motors(dataset: Path) -> None:

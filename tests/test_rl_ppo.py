@@ -207,3 +207,29 @@ def test_clipped_value_loss_is_never_below_the_plain_one() -> None:
         alg.compute_returns(st, torch.zeros(8))
         losses[clipped] = alg.update(st, torch.Generator().manual_seed(0))["loss/value"]
     assert losses[True] >= losses[False]
+
+
+def test_correlated_noise_is_standard_normal_per_step_with_lag_one_correlation_rho() -> None:
+    from types import SimpleNamespace
+
+    from wristmimic.rl.runner import Runner
+
+    fake = SimpleNamespace(cfg=PPOConfig(num_envs=8, horizon=4, minibatch_size=32, noise_correlation=0.9))
+    fake.gen = torch.Generator().manual_seed(0)
+    fake.noise = torch.randn(4000, 3, generator=fake.gen)
+    steps = []
+    for _ in range(30):
+        fake.noise = Runner._next_noise(fake)  # type: ignore[arg-type]
+        steps.append(fake.noise)
+    x = torch.stack(steps)  # (T, N, A)
+    assert x.std().item() == pytest.approx(1.0, abs=0.02)
+    lag1 = (x[1:] * x[:-1]).mean().item()
+    assert lag1 == pytest.approx(0.9, abs=0.02)
+    done = torch.zeros(4000, dtype=torch.bool)
+    done[:2000] = True
+    before = fake.noise.clone()
+    Runner._restart_noise(fake, done)  # type: ignore[arg-type]
+    assert torch.equal(fake.noise[2000:], before[2000:])
+    assert abs((fake.noise[:2000] * before[:2000]).mean().item()) < 0.05  # redrawn, independent
+    with pytest.raises(InputError, match="noise_correlation"):
+        PPOConfig(noise_correlation=1.0)

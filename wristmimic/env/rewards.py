@@ -5,7 +5,7 @@ Every ``error_*`` function returns the raw error E of one factor, shape (N,); th
 :class:`wristmimic.env.config.RewardWeights`. :func:`compute_reward` returns the product and each factor as
 ``reward/<name>`` plus each raw error as ``error/<name>``, so a user sees which factor collapses.
 
-Factors (names): body_pos, body_rot, [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
+Factors (names): body_pos, body_rot, [root_pos, root_rot] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
 (cfg.finger_targets), obj_pos, obj_rot, ig, contact_hand, contact_other, joint_energy, obj_energy_lin,
 obj_energy_ang, contact_energy.
 Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface points, D hinge joints.
@@ -136,6 +136,16 @@ def error_wrist_rot(x: RewardInputs, sets: BodySets) -> torch.Tensor:
     return quat_angle(x.ref_body_quat[:, sets.wrists], x.body_quat[:, sets.wrists]).mean(-1)
 
 
+def error_root_pos(x: RewardInputs) -> torch.Tensor:
+    """E_rootp = |p_ref - p|^2 of the root body (m^2)."""
+    return (x.ref_body_pos[:, 0] - x.body_pos[:, 0]).square().sum(-1)
+
+
+def error_root_rot(x: RewardInputs) -> torch.Tensor:
+    """E_rootr = angle(q_ref, q) of the root body (rad)."""
+    return quat_angle(x.ref_body_quat[:, 0], x.body_quat[:, 0])
+
+
 def error_obj_pos(x: RewardInputs) -> torch.Tensor:
     """E_op = mean over objects and xyz of (p_ref - p)^2."""
     return _mean((x.ref_obj_pos - x.obj_pos).square(), (1, 2))
@@ -212,6 +222,7 @@ def reward_contact_hand(err: torch.Tensor, ref_hand: torch.Tensor, lam: float) -
 def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
     """Names of the reward factors present for this config, in product order."""
     names = ["body_pos", "body_rot"]
+    names += [n for n in ("root_pos", "root_rot") if getattr(cfg.weights, n) > 0]
     if cfg.wrist_terms:
         names += ["wrist_pos", "wrist_rot"]
     if cfg.finger_targets:
@@ -241,6 +252,10 @@ def compute_reward(
         "body_pos": torch.where(mod, w.gbp, w.p),
         "body_rot": torch.where(mod, w.gbr, w.r),
     }
+    if w.root_pos > 0:
+        errors["root_pos"], lams["root_pos"] = error_root_pos(x), w.root_pos
+    if w.root_rot > 0:
+        errors["root_rot"], lams["root_rot"] = error_root_rot(x), w.root_rot
     if cfg.wrist_terms:
         errors["wrist_pos"], lams["wrist_pos"] = error_wrist_pos(x, sets), w.gwp
         errors["wrist_rot"], lams["wrist_rot"] = error_wrist_rot(x, sets), w.gwr

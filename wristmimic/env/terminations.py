@@ -82,17 +82,29 @@ def term_contact_lost(x: TerminationInputs, cfg: EnvConfig) -> torch.Tensor:
     return x.contact_lost > cfg.termination.contact_lost_frames
 
 
+_THRESHOLD_TABLES: dict[tuple[WristThresholds, torch.device], tuple[torch.Tensor, torch.Tensor]] = {}
+
+
+def _threshold_tables(thr: WristThresholds, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """(4,) position and rotation thresholds by phase code (+inf outside the window), made once per device."""
+    key = (thr, device)
+    if key not in _THRESHOLD_TABLES:
+        inf = float("inf")
+        pos = torch.full((4,), inf, dtype=torch.float32, device=device)
+        rot = torch.full((4,), inf, dtype=torch.float32, device=device)
+        for p, tp, tr in (
+            (APPROACH, thr.approach_pos, thr.approach_rot),
+            (GRASP, thr.grasp_pos, thr.grasp_rot),
+            (STABILIZE, thr.stabilize_pos, thr.stabilize_rot),
+        ):
+            pos[p], rot[p] = tp, tr
+        _THRESHOLD_TABLES[key] = (pos, rot)
+    return _THRESHOLD_TABLES[key]
+
+
 def phase_thresholds(ph: torch.Tensor, thr: WristThresholds) -> tuple[torch.Tensor, torch.Tensor]:
     """(N,) wrist position (m) and rotation (rad) thresholds of each phase; +inf outside the window."""
-    inf = float("inf")
-    pos = torch.full((4,), inf, dtype=torch.float32, device=ph.device)
-    rot = torch.full((4,), inf, dtype=torch.float32, device=ph.device)
-    for p, tp, tr in (
-        (APPROACH, thr.approach_pos, thr.approach_rot),
-        (GRASP, thr.grasp_pos, thr.grasp_rot),
-        (STABILIZE, thr.stabilize_pos, thr.stabilize_rot),
-    ):
-        pos[p], rot[p] = tp, tr
+    pos, rot = _threshold_tables(thr, ph.device)
     return pos[ph], rot[ph]
 
 

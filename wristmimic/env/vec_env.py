@@ -169,6 +169,11 @@ class WristMimicEnv:
         self._obj_mass = f32(m.body_mass[bids])[:, None] if bids else torch.zeros(0, 1, device=dev)
         self._obj_inertia = f32(m.body_inertia[bids].mean(-1))[:, None] if bids else torch.zeros(0, 1, device=dev)
         self._gravity = f32(-m.opt.gravity)
+        self.feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        """(T, D) open-loop offsets added to the residual hinges' targets (:mod:`wristmimic.env.feedforward`);
+        zero unless a run's optimised offsets are loaded."""
+        self.eval_info = True
+        """Put the evaluation errors (``info["eval"]``) in every step's info; training turns it off (unused there)."""
         self.object_gain = 0.0
         """Gain of the virtual object controller (0: off). Set by the training curriculum; needs a scene built
         with ``SceneConfig(object_actuators=True)``."""
@@ -333,7 +338,7 @@ class WristMimicEnv:
         target = self._offset + self._scale * a
         if self.cfg.action_mode == "residual":
             f = (self.frame + 1 if frames is None else frames).clamp(0, self.ref.num_frames - 1)
-            ref = self.ref.joint_angles[f] + self._ff_time * self.ref.joint_vel[f]
+            ref = self.ref.joint_angles[f] + self._ff_time * self.ref.joint_vel[f] + self.feedforward[f]
             residual = ref + self.cfg.residual_scale * a
             target = torch.where(self.residual_hinges, residual, target)
         return torch.maximum(torch.minimum(target, self._hi), self._lo)
@@ -372,8 +377,9 @@ class WristMimicEnv:
             "episode_frames": self.steps.clone(),
             "episode_start": self.start.clone(),
             "frame": self.frame.clone(),
-            "eval": self._eval_errors(s, rf, hand),
         }
+        if self.eval_info:
+            info["eval"] = self._eval_errors(s, rf, hand)
         self._prev_joint_vel = s.joint_vel
         self._prev_obj_vel = torch.cat([s.obj_linvel, s.obj_angvel], -1)
         if self.device.type != "cpu" or bool(done.any()):  # on a GPU: always, masked (no host round trip)

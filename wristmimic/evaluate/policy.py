@@ -91,5 +91,6 @@ def load_eval_policy(run_dir_or_checkpoint: str | Path) -> RunPolicy:
         "checkpoint": str(ckpt.resolve()),
         "checkpoint_sha256": sha256_file(ckpt),
         "preset": cfg.get("preset"),
+        "feedforward": p.feedforward,
     }
     return RunPolicy(p, meta)

@@ -72,7 +72,7 @@ def make_env(
         from wristmimic.rl.config import from_jsonable
 
         sc = from_jsonable(SceneConfig, sc)
-    return WristMimicEnv.from_file(
+    env = WristMimicEnv.from_file(
         dataset or meta["dataset"],
         meta["scene"],
         num_worlds=num_worlds,
@@ -84,6 +84,9 @@ def make_env(
         backend=backend,
         backend_options=backend_options,
     )
+    if meta.get("feedforward") is not None:  # the run's optimised open-loop offsets (wristmimic.env.feedforward)
+        env.feedforward = torch.as_tensor(meta["feedforward"], dtype=torch.float32, device=env.device).clone()
+    return env
 
 
 def perturb_initial_state(

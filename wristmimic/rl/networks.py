@@ -109,8 +109,13 @@ class ActorCritic(nn.Module):
         return (-0.5 * z.square() - self.log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
 
     @torch.no_grad()
-    def act(self, obs_n: torch.Tensor, generator: torch.Generator | None = None) -> tuple[torch.Tensor, ...]:
-        """Sample actions for normalised observations: ``(actions, log_probs, mu, values)``."""
+    def act(
+        self, obs_n: torch.Tensor, generator: torch.Generator | None = None, noise: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, ...]:
+        """Sample actions for normalised observations: ``(actions, log_probs, mu, values)``; ``noise`` (N, A),
+        standard normal per step (e.g. temporally correlated), replaces fresh draws from ``generator``."""
         mu = self.actor(obs_n)
-        actions = mu + torch.exp(self.log_std) * torch.randn(mu.shape, generator=generator, device=mu.device)
+        if noise is None:
+            noise = torch.randn(mu.shape, generator=generator, device=mu.device)
+        actions = mu + torch.exp(self.log_std) * noise
         return actions, self.log_prob(mu, actions), mu, self.value(obs_n)

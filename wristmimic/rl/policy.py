@@ -30,6 +30,8 @@ class Policy:
     iteration: int
     frames: int
     config: dict
+    feedforward: torch.Tensor | None = None
+    """(T, D) the run's open-loop PD-target offsets (``WristMimicEnv.feedforward``), if it optimised them."""
 
     @property
     def observation_size(self) -> int:
@@ -87,4 +89,5 @@ def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
         iteration=int(state["iteration"]),
         frames=int(state["frames"]),
         config=config,
+        feedforward=state.get("feedforward"),
     )

@@ -61,12 +61,17 @@ class Runner:
         ).to(dev)
         self.alg = PPO(self.policy, cfg)
         self.storage = RolloutStorage(cfg.horizon, cfg.num_envs, env.observation_size, env.action_size, dev)
+        self.noise = torch.zeros(cfg.num_envs, env.action_size, device=dev)
+        if cfg.noise_correlation > 0.0:  # the AR(1) process starts from its stationary (standard normal) law
+            self.noise = torch.randn(self.noise.shape, generator=self.gen, device=dev)
+        """(N, A) the exploration noise of the last step (temporally correlated when ``noise_correlation`` > 0)."""
         self.stats = EpisodeStats(env.ref.num_frames)
         self.iteration, self.frames, self.seconds = 0, 0, 0.0
         self.curriculum = ObjectCurriculum(env.cfg.object_controller, env.ref.num_frames)
         if self.curriculum.gain > 0 and not env.has_object_controller:
             raise ValueError("the object curriculum needs a training scene with SceneConfig(object_actuators=True)")
         env.object_gain = self.curriculum.gain
+        env.eval_info = False  # evaluation errors are computed by the periodic evaluation's own environment
         self._eval_env: WristMimicEnv | None = None
         self.stop_requested = False
         self.metrics: MetricsCsv | None = None
@@ -109,14 +114,45 @@ class Runner:
         for _ in range(self.cfg.horizon):
             pi.normalizer.update(self.obs)
             obs_n = pi.normalizer(self.obs)
-            actions, log_probs, mu, values = pi.act(obs_n, self.gen)
+            self.noise = self._next_noise()
+            actions, log_probs, mu, values = pi.act(obs_n, noise=self.noise)
             self.obs, reward, terminated, _, info = self.env.step(actions)
+            self._restart_noise(terminated | info["time_outs"])
             self.storage.add(obs_n, actions, log_probs, mu, values, reward, terminated, info["time_outs"])
             self.stats.record(reward, terminated, info)
         with torch.no_grad():
             last_values = pi.value(pi.normalizer(self.obs))
         self.alg.compute_returns(self.storage, last_values)
         return self.stats.flush()
+
+    def _next_noise(self) -> torch.Tensor:
+        """This step's standard-normal exploration noise: fresh draws, or the AR(1) continuation."""
+        xi = torch.randn(self.noise.shape, generator=self.gen, device=self.noise.device)
+        rho = self.cfg.noise_correlation
+        return xi if rho == 0.0 else rho * self.noise + math.sqrt(1.0 - rho * rho) * xi
+
+    def _restart_noise(self, done: torch.Tensor) -> None:
+        """Worlds whose episode ended start the next one with an independent draw (correlated noise only)."""
+        if self.cfg.noise_correlation > 0.0:
+            fresh = torch.randn(self.noise.shape, generator=self.gen, device=self.noise.device)
+            self.noise = torch.where(done[:, None], fresh, self.noise)
+
+    # -- feedforward warm start ----------------------------------------------------------------------------
+    def optimise_feedforward(self, progress: bool = False) -> None:
+        """Search the open-loop PD-target offsets of the run's scene (``env.feedforward``) before the first
+        iteration, with ``feedforward.samples`` worlds of the same scene (residual actions only); saved in every
+        checkpoint, so evaluation and view apply the same offsets and a resume does not search again."""
+        from wristmimic.env.feedforward import optimise_feedforward
+
+        c = self.env.cfg
+        if not c.feedforward.enabled or c.action_mode != "residual" or self.iteration > 0:
+            return
+        nthread = getattr(self.env.backend, "nthread", None)
+        opt = WristMimicEnv(self.env.scene, self.env.ref, c.feedforward.samples, c, 0, "cpu", nthread)
+        try:
+            self.env.feedforward = optimise_feedforward(opt, progress).to(self.env.device)
+        finally:
+            opt.close()
 
     # -- periodic evaluation -------------------------------------------------------------------------------
     def _eval_due(self) -> bool:
@@ -134,6 +170,7 @@ class Runner:
         config = json.loads(self.config_text)
         if self._eval_env is None:
             meta = {k: config.get(k) for k in ("scene", "env", "scene_config", "ref_frames")}
+            meta["feedforward"] = self.env.feedforward
             meta["dataset"] = str(self.dataset_file or config["dataset"]["path"])
             n = min(self.cfg.eval_trials, self.env.num_worlds)
             physics = config.get("physics") or {}
@@ -168,6 +205,8 @@ class Runner:
             "obs": self.obs.clone(),
             "episodes": self.stats.state_dict(),
             "curriculum": self.curriculum.state_dict(),
+            "noise": self.noise.clone(),
+            "feedforward": self.env.feedforward.clone(),
             "storage_step": self.storage.step,
             "config": self.config_text,
             "metadata": dict(
@@ -187,6 +226,10 @@ class Runner:
         self.env.load_state_dict(state["env"])
         self.obs = state["obs"].to(self.env.device)
         self.stats.load_state_dict(state["episodes"])
+        if "noise" in state:
+            self.noise = state["noise"].to(self.env.device)
+        if "feedforward" in state:
+            self.env.feedforward = state["feedforward"].to(self.env.device)
         if "curriculum" in state:  # runs from before the curriculum: none
             self.curriculum.load_state_dict(state["curriculum"])
         else:

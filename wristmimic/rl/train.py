@@ -168,6 +168,7 @@ def start_run(
         tmp.write_text(dumps(config) + "\n")
     runner = _build(config, run_dir, nthread, data)
     try:
+        runner.optimise_feedforward(progress)
         status = runner.learn(spec.ppo.max_frames, progress, should_stop)
     finally:
         runner.env.close()

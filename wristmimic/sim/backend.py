@@ -74,10 +74,11 @@ def make_backend(name: str, model: mujoco.MjModel, num_worlds: int, nthread: int
 class CpuRolloutBackend:
     """MuJoCo on CPU threads through ``mujoco.rollout`` (the C++ thread pool releases the GIL).
 
-    Sensor values after :meth:`step` are those MuJoCo computed at the start of the last physics step
-    (``mj_step`` evaluates sensors before integrating), i.e. one physics step (1/120 s) behind ``qpos``;
-    after :meth:`reset` they are exact. Every control step starts from a cleared solver warm start (the warm
-    start is not part of the saved state), which the Warp backend reproduces.
+    Sensor values after :meth:`step` and :meth:`reset` are those of the state just reached: ``mj_step``
+    evaluates sensors before it integrates, so after the substeps one more batched pass of a zero-length step
+    (the probe model, timestep 1e-12, the controls just held) evaluates them at the new state. Every control
+    step starts from a cleared solver warm start (the warm start is not part of the saved state), which the
+    Warp backend reproduces.
     """
 
     device = torch.device("cpu")
@@ -103,6 +104,7 @@ class CpuRolloutBackend:
         self._qvel = slice(1 + model.nq, 1 + model.nq + model.nv)
         self._out_state: np.ndarray | None = None
         self._out_sensor: np.ndarray | None = None
+        self._probe_sensor: np.ndarray | None = None
         self.physics_seconds = 0.0
 
     @property
@@ -166,9 +168,20 @@ class CpuRolloutBackend:
             state=self._out_state,
             sensordata=self._out_sensor,
         )
-        self.physics_seconds += time.perf_counter() - t0
         self._state[:] = self._out_state[:, -1]
-        self._sensor[:] = self._out_sensor[:, -1]
+        # sensors of the state just reached (the last substep's sensors are those of its start)
+        if self._probe_sensor is None or self._probe_sensor.shape[0] != n:
+            self._probe_sensor = np.empty((n, 1, self.model.nsensordata))
+        self._pool.rollout(
+            self._probe,
+            self._datas,
+            self._state,
+            np.ascontiguousarray(c[:, :1]),
+            nstep=1,
+            sensordata=self._probe_sensor,
+        )
+        self.physics_seconds += time.perf_counter() - t0
+        self._sensor[:] = self._probe_sensor[:, 0]
 
     def close(self) -> None:
         self._pool.close()

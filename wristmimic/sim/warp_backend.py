@@ -7,9 +7,9 @@ captured once as a CUDA graph on Warp's own stream (capture is not allowed on th
 uses), and the two streams wait on each other through events, so torch and Warp work is ordered without
 synchronising the host.
 
-Semantics match :class:`wristmimic.sim.backend.CpuRolloutBackend`: sensors after :meth:`step` are those of the
-last physics step's start (``step`` evaluates sensors before integrating); :meth:`reset` evaluates sensors of
-the new state exactly; each control step starts from a cleared solver warm start. Warp computes in float32
+Semantics match :class:`wristmimic.sim.backend.CpuRolloutBackend`: sensors after :meth:`step` and :meth:`reset`
+are those of the state just reached (a forward pass after the substeps, since ``step`` evaluates sensors before
+integrating); each control step starts from a cleared solver warm start. Warp computes in float32
 (the CPU backend in float64); ``tests/test_warp_backend.py`` states the tolerances that hold.
 
 Needs the ``warp`` extra: ``pip install 'wristmimic[warp]'`` (``mujoco-warp``, which brings ``warp-lang``).
@@ -143,6 +143,7 @@ class WarpBackend:
         t["ctrl"].copy_(ctrl.detach().to(self.device, t["ctrl"].dtype))
         t["qacc_warmstart"].zero_()
         self._launch("step", substeps)
+        self._launch("forward", 1)  # sensors of the state just reached (a step evaluates them before integrating)
 
     def _launch(self, what: str, n: int) -> None:
         """Run ``mjw.step`` n times or ``mjw.forward`` once; on CUDA through a captured graph."""
