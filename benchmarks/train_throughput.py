@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from wristmimic.env.config import variant_config
 from wristmimic.env.vec_env import WristMimicEnv
-from wristmimic.rl.config import preset
+from wristmimic.rl.config import preset, preset_env
 from wristmimic.rl.runner import Runner
+from wristmimic.scene import SceneConfig
 from wristmimic.sim.backend import CpuRolloutBackend
 
 REPO = Path(__file__).resolve().parents[1]
@@ -46,7 +46,9 @@ def raw_rate(env: WristMimicEnv, steps: int, nthread: int) -> float:
 def bench(path: Path, sid: str, preset_name: str, iterations: int, num_envs: int | None) -> None:
     nthread = os.cpu_count() or 1
     cfg = preset(preset_name, num_envs=num_envs)
-    env = WristMimicEnv.from_file(path, sid, cfg.num_envs, config=variant_config("wristmimic"), nthread=nthread)
+    env_cfg = preset_env(preset_name, "wristmimic")  # the preset's environment, as training builds it
+    scene_cfg = SceneConfig(object_actuators=env_cfg.object_controller.enabled)
+    env = WristMimicEnv.from_file(path, sid, cfg.num_envs, env_cfg, scene_cfg, nthread=nthread)
     with tempfile.TemporaryDirectory() as tmp:
         runner = Runner(env, cfg, 0, Path(tmp), "{}", {"scene": sid, "variant": "wristmimic"})
         runner.collect()

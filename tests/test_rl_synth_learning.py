@@ -1,0 +1,61 @@
+"""The recommended CPU recipe learns on the built-in synthetic scene: after 102,400 frames (~2 minutes on 2
+cores) its policy survives frame-0 trials of the quick protocol clearly longer than the zero-action policy.
+
+Measured (seeds 0, 1, 2; 64 trials each, the recipe's sigma 0.1 for both policies): trained 40.9, 40.0, 40.9
+frames against 32.9 for zero actions (range over seeds 0.9 frames; the margin asserted, 4 frames, is over 4x
+that). Object position error stays at 1.1-1.4 cm (zero actions: 0.9 cm): trials still end on the wrist
+threshold of the grasp phase, before the lift, so object tracking cannot yet separate the two policies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from wristmimic.evaluate.policy import load_eval_policy
+from wristmimic.evaluate.protocol import load_protocol
+from wristmimic.evaluate.trials import TrialSettings, make_env, run_trials
+from wristmimic.rl import TrainSpec, preset, start_run
+from wristmimic.synth.generate import generate
+
+FRAMES, TRIALS, MARGIN = 102_400, 64, 4.0
+
+
+class _Zero:
+    """Zero mean actions with the recipe's initial sigma (the untrained policy)."""
+
+    def __init__(self, metadata: dict, action_size: int, sigma: float):
+        self.metadata, self._a, self._sigma = metadata, action_size, sigma
+
+    def act(self, obs: torch.Tensor, deterministic: bool = True) -> torch.Tensor:
+        return torch.zeros(obs.shape[0], self._a)
+
+    @property
+    def sigma(self) -> torch.Tensor:
+        return torch.full((self._a,), self._sigma)
+
+
+def _trials(policy) -> tuple[float, float]:
+    env = make_env(policy.metadata, 32, nthread=2)
+    recs: list[dict] = []
+    run_trials(env, policy, TrialSettings.from_protocol(load_protocol("quick")), 0, TRIALS, recs.append)
+    env.close()
+    frames = np.concatenate([r["frames_completed"] for r in recs])
+    obj = np.concatenate([r["obj_pos_err_cm"] for r in recs])
+    return float(frames.mean()), float(np.nanmean(obj))
+
+
+@pytest.mark.slow
+def test_recipe_survives_frame_0_trials_longer_than_zero_actions(tmp_path: Path) -> None:
+    synth = generate(tmp_path / "synth.h5", seed=0, variants=("default",))
+    ppo = replace(preset("cpu"), max_frames=FRAMES, eval_every=0)
+    start_run(TrainSpec(synth, "synth_default", "wristmimic", 0, "cpu", ppo), tmp_path / "run", nthread=2, progress=False)
+    trained = load_eval_policy(tmp_path / "run")
+    zero = _Zero(trained.metadata, trained.policy.action_size, ppo.sigma)
+    (f_trained, obj_trained), (f_zero, _) = _trials(trained), _trials(zero)
+    assert f_trained > f_zero + MARGIN, (f_trained, f_zero)
+    assert obj_trained < 2.0  # the object is not knocked away
