@@ -234,3 +234,14 @@ def tiny_ppo_toml(max_frames: int) -> str:
         "[train.ppo]\nnum_envs = 2\nhorizon = 4\nminibatch_size = 8\nepochs = 1\n"
         f"actor_hidden = [16]\ncritic_hidden = [16]\nmax_frames = {max_frames}"
     )
+
+
+def converted_intermimic(tmp: Path, T: int) -> Path:
+    """A canonical file converted from :func:`write_intermimic_folder` (one ``sub1_box_000``-style sequence of ``T``
+    frames) under ``tmp``; hulls cached in ``tmp/c``."""
+    from wristmimic.convert.common import ConvertOptions
+    from wristmimic.convert.intermimic import convert_intermimic
+
+    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
+    convert_intermimic(write_intermimic_folder(tmp / "im", T=T), tmp / "im.h5", options=opts)
+    return tmp / "im.h5"

@@ -10,8 +10,6 @@ import numpy as np
 import pytest
 import torch
 
-from wristmimic.convert.common import ConvertOptions
-from wristmimic.convert.intermimic import convert_intermimic
 from wristmimic.env.config import EnvConfig, env_config_from_dict, variant_config
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.evaluate.trials import make_env
@@ -19,7 +17,7 @@ from wristmimic.rl import TrainSpec, preset, start_run
 from wristmimic.rl.config import to_jsonable
 from wristmimic.view.rollout import env_for_policy
 
-from synthetic import write_intermimic_folder
+from synthetic import converted_intermimic
 
 SID = "sub1_box_000"
 
@@ -27,9 +25,7 @@ SID = "sub1_box_000"
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("actions")
-    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
-    convert_intermimic(write_intermimic_folder(tmp / "im", T=30), tmp / "im.h5", options=opts)
-    return tmp / "im.h5"
+    return converted_intermimic(tmp, 30)
 
 
 def _env(dataset: Path, **kw) -> WristMimicEnv:

@@ -9,8 +9,6 @@ from pathlib import Path
 import pytest
 import torch
 
-from wristmimic.convert.common import ConvertOptions
-from wristmimic.convert.intermimic import convert_intermimic
 from wristmimic.env.config import FeedforwardConfig, variant_config
 from wristmimic.env.feedforward import interpolate, knot_count, optimise_feedforward
 from wristmimic.env.vec_env import WristMimicEnv
@@ -20,7 +18,7 @@ from wristmimic.rl import TrainSpec, preset, resume_run, start_run
 from wristmimic.rl.checkpoint import load_checkpoint
 from wristmimic.view.rollout import env_for_policy
 
-from synthetic import write_intermimic_folder
+from synthetic import converted_intermimic
 
 SID = "sub1_box_000"
 SMALL = FeedforwardConfig(enabled=True, knot_frames=10, horizon_knots=2, samples=4, iterations=2, elite_frac=0.5)
@@ -29,9 +27,7 @@ SMALL = FeedforwardConfig(enabled=True, knot_frames=10, horizon_knots=2, samples
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("ff")
-    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
-    convert_intermimic(write_intermimic_folder(tmp / "im", T=30), tmp / "im.h5", options=opts)
-    return tmp / "im.h5"
+    return converted_intermimic(tmp, 30)
 
 
 def test_knots_interpolate_linearly_and_cover_the_clip() -> None:

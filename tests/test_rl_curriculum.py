@@ -11,8 +11,6 @@ from pathlib import Path
 import pytest
 import torch
 
-from wristmimic.convert.common import ConvertOptions
-from wristmimic.convert.intermimic import convert_intermimic
 from wristmimic.env.config import ObjectControllerConfig, variant_config
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.evaluate.policy import load_eval_policy
@@ -22,7 +20,7 @@ from wristmimic.rl.checkpoint import load_checkpoint
 from wristmimic.rl.curriculum import ObjectCurriculum
 from wristmimic.scene import SceneConfig
 
-from synthetic import write_intermimic_folder
+from synthetic import converted_intermimic
 
 SID = "sub1_box_000"
 
@@ -30,9 +28,7 @@ SID = "sub1_box_000"
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("curriculum")
-    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
-    convert_intermimic(write_intermimic_folder(tmp / "im", T=40), tmp / "im.h5", options=opts)
-    return tmp / "im.h5"
+    return converted_intermimic(tmp, 40)
 
 
 def _object_error_after(dataset: Path, gain: float, steps: int = 25) -> float:

@@ -53,7 +53,9 @@ def _trials(policy) -> tuple[float, float]:
 def test_recipe_survives_frame_0_trials_longer_than_zero_actions(tmp_path: Path) -> None:
     synth = generate(tmp_path / "synth.h5", seed=0, variants=("default",))
     ppo = replace(preset("cpu"), max_frames=FRAMES, eval_every=0)
-    start_run(TrainSpec(synth, "synth_default", "wristmimic", 0, "cpu", ppo), tmp_path / "run", nthread=2, progress=False)
+    start_run(
+        TrainSpec(synth, "synth_default", "wristmimic", 0, "cpu", ppo), tmp_path / "run", nthread=2, progress=False
+    )
     trained = load_eval_policy(tmp_path / "run")
     zero = _Zero(trained.metadata, trained.policy.action_size, ppo.sigma)
     (f_trained, obj_trained), (f_zero, _) = _trials(trained), _trials(zero)

@@ -7,19 +7,15 @@ import numpy as np
 import pytest
 import torch
 
-from wristmimic.convert.common import ConvertOptions
-from wristmimic.convert.intermimic import convert_intermimic
 from wristmimic.env.vec_env import WristMimicEnv
 
-from synthetic import write_intermimic_folder
+from synthetic import converted_intermimic
 
 
 @pytest.fixture(scope="module")
 def env(tmp_path_factory: pytest.TempPathFactory) -> WristMimicEnv:
     tmp = tmp_path_factory.mktemp("backend")
-    opts = ConvertOptions(hull_cache_dir=tmp / "c", show_progress=False)
-    convert_intermimic(write_intermimic_folder(tmp / "im", T=30), tmp / "im.h5", options=opts)
-    return WristMimicEnv.from_file(tmp / "im.h5", "sub1_box_000", 3, seed=0, nthread=2)
+    return WristMimicEnv.from_file(converted_intermimic(tmp, 30), "sub1_box_000", 3, seed=0, nthread=2)
 
 
 def _forward_sensors(model: mujoco.MjModel, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray) -> np.ndarray:
