@@ -258,15 +258,20 @@ LEGACY_ENV_DEFAULTS: dict = {
 starts, no root factors (merged one level deep: a recorded table keeps its own fields)."""
 
 
+def overlay(base: dict, over: dict) -> dict:
+    """``base`` with ``over``'s entries on top, nested tables merged one level deep."""
+    out = dict(base)
+    for key, value in over.items():
+        both = isinstance(value, dict) and isinstance(base.get(key), dict)
+        out[key] = {**base[key], **value} if both else value
+    return out
+
+
 def env_config_from_dict(data: dict) -> EnvConfig:
     """An :class:`EnvConfig` from a run's recorded ``env``; fields it predates keep their old behaviour."""
     from wristmimic.rl.config import from_jsonable
 
-    full = {**LEGACY_ENV_DEFAULTS, **data}
-    for key, old in LEGACY_ENV_DEFAULTS.items():
-        if isinstance(old, dict) and isinstance(data.get(key), dict):
-            full[key] = {**old, **data[key]}
-    return from_jsonable(EnvConfig, full)
+    return from_jsonable(EnvConfig, overlay(LEGACY_ENV_DEFAULTS, data))
 
 
 def check_env_config(cfg: EnvConfig) -> None:

@@ -156,6 +156,11 @@ class WristMimicEnv:
         self._hinge_qpos = idx(scene.hinge_qposadr.reshape(-1))
         self._obj_qpos = idx([o.qposadr for o in scene.dynamic_objects])
         self._obj_dof = idx([o.dofadr for o in scene.dynamic_objects])
+        k3, k4 = torch.arange(3, device=dev), torch.arange(4, device=dev)
+        self._obj_pos_q, self._obj_quat_q = self._obj_qpos[:, None] + k3, self._obj_qpos[:, None] + 3 + k4
+        """(O, 3) / (O, 4) qpos columns of each dynamic object's position / quaternion."""
+        self._obj_lin_v, self._obj_ang_v = self._obj_dof[:, None] + k3, self._obj_dof[:, None] + 3 + k3
+        """(O, 3) qvel columns of each dynamic object's linear (world) / angular (local) velocity."""
         self.action_size = len(self._act_cols)
         # virtual object controller (training only): motors on the objects' free joints, if the scene has them
         m = scene.model
@@ -239,13 +244,10 @@ class WristMimicEnv:
         qvel[:, 0:3], qvel[:, 3:6] = r.root_linvel[f].double(), r.root_angvel_local[f].double()
         qvel[:, self._hinge_dof] = r.joint_vel[f].double()
         if len(self._obj_qpos):
-            k3 = torch.arange(3, device=self.device)
-            qpos[:, (self._obj_qpos[:, None] + k3).flatten()] = r.obj_pos[f].double().flatten(1)
-            qpos[:, (self._obj_qpos[:, None] + 3 + torch.arange(4, device=self.device)).flatten()] = (
-                r.obj_quat[f].double().flatten(1)
-            )
-            qvel[:, (self._obj_dof[:, None] + k3).flatten()] = r.obj_linvel[f].double().flatten(1)
-            qvel[:, (self._obj_dof[:, None] + 3 + k3).flatten()] = r.obj_angvel_local[f].double().flatten(1)
+            qpos[:, self._obj_pos_q.flatten()] = r.obj_pos[f].double().flatten(1)
+            qpos[:, self._obj_quat_q.flatten()] = r.obj_quat[f].double().flatten(1)
+            qvel[:, self._obj_lin_v.flatten()] = r.obj_linvel[f].double().flatten(1)
+            qvel[:, self._obj_ang_v.flatten()] = r.obj_angvel_local[f].double().flatten(1)
         return qpos, qvel
 
     def _reset_worlds(self, mask: torch.Tensor, frames: torch.Tensor | None = None) -> None:
@@ -394,10 +396,9 @@ class WristMimicEnv:
             raise RuntimeError("object_gain > 0 needs a scene built with SceneConfig(object_actuators=True)")
         c, r = self.cfg.object_controller, self.ref
         f = (self.frame + 1).clamp(0, r.num_frames - 1)
-        k3, k4 = torch.arange(3, device=self.device), torch.arange(4, device=self.device)
         qpos, qvel = self.backend.qpos.to(torch.float32), self.backend.qvel.to(torch.float32)
-        pos, quat = qpos[:, self._obj_qpos[:, None] + k3], qpos[:, self._obj_qpos[:, None] + 3 + k4]
-        lin, ang = qvel[:, self._obj_dof[:, None] + k3], qvel[:, self._obj_dof[:, None] + 3 + k3]
+        pos, quat = qpos[:, self._obj_pos_q], qpos[:, self._obj_quat_q]
+        lin, ang = qvel[:, self._obj_lin_v], qvel[:, self._obj_ang_v]
         acc = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin) + self._gravity
         rot = quat_to_rotvec(quat_mul(quat_conj(quat), r.obj_quat[f]))  # local frame
         alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)

@@ -174,14 +174,11 @@ PRESET_ENV: dict[str, dict[str, Any]] = {
 
 def preset_env(name: str, variant: str) -> Any:
     """The environment config of ``variant`` under preset ``name`` (``EnvConfig``)."""
-    from wristmimic.env.config import env_config_from_dict, variant_config
+    from wristmimic.env.config import env_config_from_dict, overlay, variant_config
 
     if name not in PRESETS:
         raise InputError(None, "preset", f"unknown preset {name!r}", f"one of {', '.join(PRESETS)}")
-    base = to_jsonable(variant_config(variant))
-    for key, value in PRESET_ENV.get(name, {}).items():
-        base[key] = {**base[key], **value} if isinstance(value, dict) else value
-    return env_config_from_dict(base)
+    return env_config_from_dict(overlay(to_jsonable(variant_config(variant)), PRESET_ENV.get(name, {})))
 
 
 def preset(name: str, **overrides: Any) -> PPOConfig:

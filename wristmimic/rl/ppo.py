@@ -69,10 +69,7 @@ class PPO:
             lr = max(c.lr_min, lr / 1.5)
         elif kl < 0.5 * c.desired_kl:
             lr = min(c.lr_max, lr * 1.5)
-        self.optimizer.param_groups[0]["lr"] = lr
-        if c.critic_learning_rate is None:  # one group holds actor and critic
-            for group in self.optimizer.param_groups:
-                group["lr"] = lr
+        self.optimizer.param_groups[0]["lr"] = lr  # the actor's group (and the critic's, when it shares the rate)
 
     def compute_returns(self, storage: RolloutStorage, last_values: torch.Tensor) -> None:
         adv, ret = compute_gae(

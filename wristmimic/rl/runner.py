@@ -164,11 +164,13 @@ class Runner:
         """``eval_trials`` frame-0 trials of the quick protocol with the current policy, exactly as
         ``wristmimic evaluate`` runs them (seeded action noise, the run's terminations, no object controller):
         ``eval/success_rate``, ``eval/frames_completed`` (mean), ``eval/obj_pos_err_cm``, ``eval/contact_ratio``."""
+        from wristmimic.evaluate.policy import RunPolicy
         from wristmimic.evaluate.protocol import load_protocol
         from wristmimic.evaluate.trials import TrialSettings, make_env, run_trials
+        from wristmimic.rl.policy import Policy
 
-        config = json.loads(self.config_text)
         if self._eval_env is None:
+            config = json.loads(self.config_text)
             meta = {k: config.get(k) for k in ("scene", "env", "scene_config", "ref_frames")}
             meta["feedforward"] = self.env.feedforward
             meta["dataset"] = str(self.dataset_file or config["dataset"]["path"])
@@ -179,7 +181,12 @@ class Runner:
             )
         records: list[dict[str, np.ndarray]] = []
         settings = TrialSettings.from_protocol(load_protocol("quick"))
-        run_trials(self._eval_env, _TrainingPolicy(self.policy), settings, 0, self.cfg.eval_trials, records.append)
+        m = self.metadata
+        seed = int(m.get("seed", 0))
+        current = Policy(
+            self.policy, m["scene"], m["variant"], m.get("dataset_sha256", ""), seed, self.iteration, self.frames, {}
+        )
+        run_trials(self._eval_env, RunPolicy(current, {}), settings, 0, self.cfg.eval_trials, records.append)
         col = {
             k: np.concatenate([r[k] for r in records])
             for k in ("success", "frames_completed", "obj_pos_err_cm", "contact_ratio")
@@ -246,23 +253,6 @@ class Runner:
 
 EVAL_COLUMNS = ("eval/success_rate", "eval/frames_completed", "eval/obj_pos_err_cm", "eval/contact_ratio")
 """Columns of the periodic evaluation in ``metrics.csv`` (NaN in iterations without one)."""
-
-
-class _TrainingPolicy:
-    """The policy being trained behind :class:`wristmimic.evaluate.policy.EvalPolicy`."""
-
-    metadata: dict[str, Any] = {}
-
-    def __init__(self, net: ActorCritic):
-        self.net = net
-
-    @torch.no_grad()
-    def act(self, obs: torch.Tensor, deterministic: bool = True) -> torch.Tensor:
-        return self.net.actor(self.net.normalizer(obs))
-
-    @property
-    def sigma(self) -> torch.Tensor:
-        return torch.exp(self.net.log_std.detach().to(torch.float32))
 
 
 @contextlib.contextmanager

@@ -104,7 +104,6 @@ class CpuRolloutBackend:
         self._qvel = slice(1 + model.nq, 1 + model.nq + model.nv)
         self._out_state: np.ndarray | None = None
         self._out_sensor: np.ndarray | None = None
-        self._probe_sensor: np.ndarray | None = None
         self.physics_seconds = 0.0
 
     @property
@@ -143,12 +142,10 @@ class CpuRolloutBackend:
         st[:, self._qpos] = qpos.cpu().numpy()[ids]
         st[:, self._qvel] = qvel.cpu().numpy()[ids]
         st[:, 1 + self.model.nq + self.model.nv :] = 0.0
-        ctrl = np.zeros((len(ids), 1, self.model.nu))
         t0 = time.perf_counter()
-        _, sens = self._pool.rollout(self._probe, self._datas, st, ctrl, nstep=1)
+        self._sensor[ids] = self._sensors_at(st, np.zeros((len(ids), 1, self.model.nu)))
         self.physics_seconds += time.perf_counter() - t0
         self._state[ids] = st
-        self._sensor[ids] = sens[:, 0]
 
     def step(self, ctrl: torch.Tensor, substeps: int) -> None:
         n = self.num_worlds
@@ -170,18 +167,14 @@ class CpuRolloutBackend:
         )
         self._state[:] = self._out_state[:, -1]
         # sensors of the state just reached (the last substep's sensors are those of its start)
-        if self._probe_sensor is None or self._probe_sensor.shape[0] != n:
-            self._probe_sensor = np.empty((n, 1, self.model.nsensordata))
-        self._pool.rollout(
-            self._probe,
-            self._datas,
-            self._state,
-            np.ascontiguousarray(c[:, :1]),
-            nstep=1,
-            sensordata=self._probe_sensor,
-        )
+        self._sensor[:] = self._sensors_at(self._state, np.ascontiguousarray(c[:, :1]))
         self.physics_seconds += time.perf_counter() - t0
-        self._sensor[:] = self._probe_sensor[:, 0]
+
+    def _sensors_at(self, states: np.ndarray, ctrl: np.ndarray) -> np.ndarray:
+        """(n, nsensordata) sensors of full-physics ``states`` (n, nstate) under ``ctrl`` (n, 1, nu), contiguous:
+        one zero-length step of the probe model (no time passes; the states are not changed)."""
+        _, sens = self._pool.rollout(self._probe, self._datas, states, ctrl, nstep=1)
+        return sens[:, 0]
 
     def close(self) -> None:
         self._pool.close()
