@@ -233,3 +233,20 @@ def test_correlated_noise_is_standard_normal_per_step_with_lag_one_correlation_r
     assert abs((fake.noise[:2000] * before[:2000]).mean().item()) < 0.05  # redrawn, independent
     with pytest.raises(InputError, match="noise_correlation"):
         PPOConfig(noise_correlation=1.0)
+
+
+def test_sigma_schedule_is_log_linear_between_its_frames_and_holds_after() -> None:
+    cfg = PPOConfig(log_std=math.log(0.1), final_std=0.001, std_anneal_start=100, std_anneal_end=300)
+    sig = lambda f: math.exp(cfg.log_std_at(f))  # noqa: E731
+    assert sig(0) == pytest.approx(0.1) and sig(100) == pytest.approx(0.1)
+    assert sig(200) == pytest.approx(0.01)  # half-way in log space
+    assert sig(300) == pytest.approx(0.001) and sig(10_000) == pytest.approx(0.001)
+    assert PPOConfig(log_std=-2.0).log_std_at(10**9) == -2.0  # no schedule: the fixed sigma
+    for bad in (
+        dict(final_std=-0.1),
+        dict(final_std=0.01, learn_std=True),
+        dict(final_std=0.01, min_std=0.02),
+        dict(final_std=0.01, std_anneal_start=5, std_anneal_end=4),
+    ):
+        with pytest.raises(InputError, match="std"):
+            PPOConfig(**bad)

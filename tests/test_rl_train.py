@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import runpy
 import signal
@@ -197,3 +198,14 @@ def test_learning_curve_script_plots_a_run(dataset: Path, tmp_path: Path) -> Non
     script = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "learning_curve.py"))
     out = script["plot"](tmp_path / "run", tmp_path / "reports" / "curve.png", 5)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_sigma_schedule_sets_each_rollouts_sigma_and_the_policy_keeps_the_last(dataset: Path, tmp_path: Path) -> None:
+    kw = dict(learn_std=False, min_std=0.0, final_std=0.01, std_anneal_start=32, std_anneal_end=96)
+    start_run(_spec(dataset, 4, **kw), tmp_path / "run", nthread=1, progress=False)
+    cfg = _spec(dataset, 4, **kw).ppo
+    logged = [float(r["loss/sigma"]) for r in _rows(tmp_path / "run")]
+    # the rollout of iteration k is collected after (k - 1) x 32 frames: 0.1, 0.1, 0.0316, 0.01
+    assert logged == pytest.approx([math.exp(cfg.log_std_at(32 * k)) for k in range(4)], rel=1e-5)
+    assert logged[-1] == pytest.approx(0.01, rel=1e-5) and logged[1] == pytest.approx(0.1, rel=1e-5)
+    assert load_policy(tmp_path / "run").net.log_std.exp() == pytest.approx(torch.full((153,), 0.01), rel=1e-5)

@@ -76,6 +76,15 @@ class PPOConfig:
     """Learn a state-independent log sigma (rsl_rl) instead of keeping ``log_std`` fixed."""
     min_std: float = 0.0
     """Floor of a learned sigma (0: none)."""
+    final_std: float = 0.0
+    """Sigma annealing (DeepMimic anneals its exploration noise): > 0 moves a fixed sigma log-linearly from
+    exp(``log_std``) to this value between ``std_anneal_start`` and ``std_anneal_end`` training frames, then
+    holds it. The trained policy keeps the final sigma, which the evaluation protocol's sampled actions use.
+    0: no schedule."""
+    std_anneal_start: int = 0
+    """Training frames at which the sigma schedule starts."""
+    std_anneal_end: int = 0
+    """Training frames at which the sigma schedule reaches ``final_std``."""
     noise_correlation: float = 0.0
     """Temporal correlation rho of the exploration noise: eps_t = rho eps_(t-1) + sqrt(1 - rho^2) xi_t per world
     and action (an AR(1) process with a standard normal marginal, redrawn when an episode starts); 0: independent
@@ -98,6 +107,17 @@ class PPOConfig:
         batch = self.num_envs * self.horizon
         if not 0.0 <= self.noise_correlation < 1.0:
             raise InputError(None, "ppo.noise_correlation", f"{self.noise_correlation}", "a value in [0, 1)")
+        if self.final_std < 0.0 or (self.final_std > 0.0 and (self.learn_std or self.final_std < self.min_std)):
+            raise InputError(
+                None, "ppo.final_std", f"{self.final_std}", "0 (no schedule), or >= min_std with learn_std off"
+            )
+        if self.final_std > 0.0 and not 0 <= self.std_anneal_start <= self.std_anneal_end:
+            raise InputError(
+                None,
+                "ppo.std_anneal_start/end",
+                f"{self.std_anneal_start}..{self.std_anneal_end}",
+                "0 <= start <= end (training frames)",
+            )
         if self.schedule not in SCHEDULES:
             raise InputError(
                 None, "ppo.schedule", f"unknown schedule {self.schedule!r}", f"one of {', '.join(SCHEDULES)}"
@@ -121,6 +141,14 @@ class PPOConfig:
     def sigma(self) -> float:
         """The initial (or fixed) sigma."""
         return math.exp(self.log_std)
+
+    def log_std_at(self, frames: int) -> float:
+        """Log sigma of the rollout collected after ``frames`` training frames (``log_std`` without a schedule)."""
+        if self.final_std <= 0.0:
+            return self.log_std
+        span = self.std_anneal_end - self.std_anneal_start
+        t = 1.0 if span <= 0 else min(max((frames - self.std_anneal_start) / span, 0.0), 1.0)
+        return self.log_std + t * (math.log(self.final_std) - self.log_std)
 
     @property
     def min_log_std(self) -> float:

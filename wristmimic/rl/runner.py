@@ -85,6 +85,8 @@ class Runner:
             while self.frames < max_frames and not self.stop_requested:
                 t0 = time.perf_counter()
                 gain = self.env.object_gain
+                if self.cfg.final_std > 0.0:  # the sigma schedule (a fixed sigma: a buffer, saved with the policy)
+                    self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
                 episode_row = self.collect()
                 losses = self.alg.update(self.storage, self.gen)
                 self.storage.clear()
