@@ -6,7 +6,9 @@ import contextlib
 import hashlib
 import os
 import pickle
+import re
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -57,27 +59,13 @@ def atomic_output(path: str | Path, suffix: str = "") -> Iterator[Path]:
 def load_pt_tensor(path: str | Path, *, ndim: int = 2) -> np.ndarray:
     """Load a ``.pt`` file that must hold one plain tensor; returns float64 numpy.
 
-    Uses ``torch.load(weights_only=True, map_location="cpu")``: a pickle carrying code is refused, and
-    files saved on CUDA load on the CPU. Checks the rank and that every value is finite.
+    Read with :func:`torch_load_untrusted`: a pickle carrying code is refused, and files saved on CUDA load on
+    the CPU. Checks the rank and that every value is finite.
     """
     import torch
 
     path = Path(path)
-    try:
-        obj = torch.load(path, weights_only=True, map_location="cpu")
-    except pickle.UnpicklingError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "refused"
-        raise InputError(
-            path, "<pickle>", f"not a plain tensor file: {first[:200]}", "a tensor saved by torch.save"
-        ) from None
-    except Exception as exc:  # truncated zip, not a torch file, ...
-        raise InputError(
-            path,
-            "<file>",
-            f"cannot be read by torch.load ({type(exc).__name__}: "
-            f"{str(exc).splitlines()[0][:160] if str(exc) else ''})",
-            "a tensor saved by torch.save",
-        ) from None
+    obj = torch_load_untrusted(path, "a tensor saved by torch.save")
     if not isinstance(obj, torch.Tensor):
         raise InputError(path, "<root>", f"holds a {type(obj).__name__}", "a single tensor")
     arr = obj.detach().to(torch.float64).numpy()
@@ -88,6 +76,176 @@ def load_pt_tensor(path: str | Path, *, ndim: int = 2) -> np.ndarray:
         r, c = np.argwhere(bad)[0] if arr.ndim == 2 else (np.argwhere(bad)[0][0], -1)
         raise InputError(path, f"row {r} column {c}", f"{int(bad.sum())} non-finite values (NaN/inf)", "finite values")
     return arr
+
+
+# --------------------------------------------------------------------------- torch files from elsewhere
+#
+# torch.load(weights_only=True) refuses pickles that name code, but its messages are long, suggest re-running
+# with weights_only=False (which would run the code) and read the same for a refused pickle and for random
+# bytes. torch_load_untrusted turns every failure into one line that says which it was.
+
+_SCAN_LIMIT = 16 << 20
+"""Bytes of a refused file that are parsed (never run) to find the global it names."""
+_STRING_OPS = frozenset(
+    {"STRING", "BINSTRING", "SHORT_BINSTRING", "UNICODE", "SHORT_BINUNICODE", "BINUNICODE", "BINUNICODE8"}
+)
+_QUIET_OPS = frozenset({"MEMOIZE", "PUT", "BINPUT", "LONG_BINPUT", "FRAME", "PROTO", "STOP"})
+
+
+def _torch_own(name: str) -> bool:
+    """A global every torch.save file names (tensor rebuilding, OrderedDict): not what made torch refuse it."""
+    return name == "torch" or name.startswith("torch.") or name == "collections.OrderedDict"
+
+
+def _pickle_global(data: bytes) -> tuple[bool, str | None]:
+    """Parse (never run) the pickles at the start of ``data``: (whether at least one is complete, the first
+    global other than torch's own that a complete one names, as ``module.name``)."""
+    import io
+    import pickletools
+
+    stream = io.BytesIO(data)
+    complete = False
+    for _ in range(8):  # torch's legacy layout is several pickles in a row, then raw storage bytes
+        if stream.tell() >= len(data):
+            break
+        pushed: list[object] = []  # per pushing opcode: its string, or None
+        memo: dict[int, object] = {}
+        found: str | None = None
+        try:
+            for op, arg, _pos in pickletools.genops(stream):
+                name, named = op.name, None
+                if name in ("GLOBAL", "INST"):
+                    named = str(arg).replace(" ", ".")
+                elif name == "STACK_GLOBAL":
+                    mod, attr = ([None, None, *pushed])[-2:]
+                    named = f"{mod}.{attr}" if isinstance(mod, str) and isinstance(attr, str) else "(unnamed)"
+                elif name.startswith("EXT"):
+                    named = f"(extension code {arg})"
+                if found is None and named is not None and not _torch_own(named):
+                    found = named
+                if name == "MEMOIZE":
+                    memo[len(memo)] = pushed[-1] if pushed else None
+                elif name in ("PUT", "BINPUT", "LONG_BINPUT"):
+                    memo[int(arg)] = pushed[-1] if pushed else None
+                elif name in ("GET", "BINGET", "LONG_BINGET"):
+                    pushed.append(memo.get(int(arg)))
+                elif name not in _QUIET_OPS:
+                    pushed.append(arg if name in _STRING_OPS and isinstance(arg, str) else None)
+        except Exception:  # noqa: BLE001 - not (or no longer) a pickle: stop at the last complete one
+            return complete, None
+        complete = True
+        if found is not None:
+            return True, found
+    return complete, None
+
+
+def first_sentence(text: str, limit: int = 160) -> str:
+    """The first sentence of ``text`` on one line; past ``limit`` characters cut at a word and marked `` ...``."""
+    flat = " ".join(text.split())
+    first = re.split(r"(?<=[.!?])\s", flat, maxsplit=1)[0].rstrip(".")
+    if len(first) <= limit:
+        return first
+    return first[:limit].rsplit(" ", 1)[0] + " ..."
+
+
+def _torch_load_error(path: Path, exc: Exception, what: str) -> InputError:
+    """The one-line error for a file torch.load (weights_only) failed on."""
+    import pickletools
+    import zipfile
+
+    refused = "not a plain tensor: contains code or objects"
+    named = re.search(r"GLOBAL ([A-Za-z_][\w.]*)", str(exc))
+    if named:
+        return InputError(path, "<pickle>", f"{refused} (GLOBAL {named.group(1).rstrip('.')})", what)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(_SCAN_LIMIT)
+    except OSError as err:
+        return InputError(path, None, f"cannot be read ({err.strerror or type(err).__name__})", what)
+    reason = None
+    if not head:
+        reason = "empty file"
+    elif head.startswith(b"PK\x03\x04"):
+        try:
+            with zipfile.ZipFile(path) as z:
+                pkl = [n for n in z.namelist() if n == "data.pkl" or n.endswith("/data.pkl")]
+                head = z.read(pkl[0])[:_SCAN_LIMIT] if pkl else b""
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError, RuntimeError, NotImplementedError):
+            reason = "truncated or corrupt zip archive"
+        else:
+            reason = None if pkl else "a zip archive without data.pkl"
+    if reason is None:
+        is_pickle, name = _pickle_global(head)
+        opcode = re.search(r"Unsupported operand (\d+)", str(exc))
+        if name is not None and isinstance(exc, pickle.UnpicklingError):
+            return InputError(path, "<pickle>", f"{refused} (GLOBAL {name})", what)
+        if not is_pickle:
+            reason = "neither a zip archive nor a pickle"
+        elif opcode and 0 <= int(opcode.group(1)) < 256:
+            op = pickletools.code2op.get(chr(int(opcode.group(1))))
+            reason = f"pickle opcode {op.name if op else opcode.group(1)}, which the safe loader does not read"
+        elif isinstance(exc, pickle.UnpicklingError) or "weights_only" in str(exc):
+            reason = "a pickle, but not in torch.save's layout"
+        else:
+            reason = first_sentence(str(exc)) or type(exc).__name__
+    return InputError(path, "<file>", f"not a torch file (cannot be read: {reason})", what)
+
+
+def torch_load_untrusted(path: str | Path, what: str) -> object:
+    """``torch.load(path, weights_only=True, map_location="cpu")`` for a file from elsewhere.
+
+    Tensors and plain containers load (on the CPU); nothing in the file is run. Every failure is one
+    :class:`InputError` naming the file, with ``what`` (e.g. ``"a tensor saved by torch.save"``) as the
+    expectation: ``<pickle>: not a plain tensor: contains code or objects (GLOBAL module.name)`` for a pickle
+    that names code or other objects, ``<file>: not a torch file (cannot be read: ...)`` for random bytes,
+    truncated or empty files, ``cannot be read (<OS error>)`` when the file cannot be opened. The messages never
+    suggest ``weights_only=False``. torch's warnings (e.g. about the pickle protocol) are silenced.
+    """
+    import torch
+
+    path = Path(path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as exc:  # noqa: BLE001 - KeyError, EOFError, RuntimeError, OSError (EINVAL), ... for bad files
+        raise _torch_load_error(path, exc, what) from None
+
+
+# --------------------------------------------------------------------------- output paths
+
+
+def _first_existing(path: Path) -> Path:
+    """``path`` or its nearest ancestor that exists."""
+    for p in (path, *path.parents):
+        if p.exists():
+            return p
+    return Path(".")
+
+
+def check_output_file(path: str | Path, key: str | None = "--out") -> None:
+    """Refuse, before any work, a file to write that is an existing folder or lies below a file.
+
+    ``key`` names the option in the message. A missing or read-only folder is left to :func:`atomic_output`.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(path, key, "is a folder", "a file name to write")
+    above = _first_existing(path.parent if str(path.parent) else Path("."))
+    if not above.is_dir():
+        raise InputError(path, key, f"{above} is a file, not a folder", "a file name in a folder")
+
+
+def check_output_folder(path: str | Path, key: str | None = "--out") -> None:
+    """Refuse, before any work, a folder to write into that is a file, lies below a file or cannot be made."""
+    path = Path(path)
+    above = _first_existing(path)
+    if above == path and not path.is_dir():
+        raise InputError(path, key, "is a file, not a folder", "a folder to write into, made if missing")
+    if not above.is_dir():
+        raise InputError(path, key, f"{above} is a file, not a folder", "a folder to write into, made if missing")
+    if not os.access(above, os.W_OK | os.X_OK):
+        raise InputError(path, key, f"{above} is not writable", "a folder to write into, made if missing")
 
 
 # --------------------------------------------------------------------------- restricted unpickling

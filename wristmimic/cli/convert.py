@@ -9,6 +9,7 @@ import typer
 from wristmimic.cli.errors import user_errors
 from wristmimic.convert.common import ConvertOptions, ConvertReport
 from wristmimic.convert.hulls import HullParams
+from wristmimic.safe_io import check_output_file
 
 app = typer.Typer(help="Convert source datasets into the canonical HDF5 reference format.", no_args_is_help=True)
 
@@ -62,6 +63,7 @@ def intermimic(
     from wristmimic.convert.intermimic import convert_intermimic
 
     with user_errors():
+        check_output_file(out)
         r = convert_intermimic(
             src,
             out,
@@ -109,6 +111,7 @@ def skillmimic_parahome(
     from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
 
     with user_errors():
+        check_output_file(out)
         r = convert_skillmimic_parahome(
             src,
             out,
@@ -151,6 +154,7 @@ def parahome_raw(
     from wristmimic.convert.parahome_raw import convert_parahome_raw
 
     with user_errors():
+        check_output_file(out)
         r = convert_parahome_raw(
             root,
             sequence,
@@ -195,6 +199,7 @@ def omomo_raw(
     from wristmimic.convert.omomo_raw import convert_omomo_raw
 
     with user_errors():
+        check_output_file(out)
         r = convert_omomo_raw(
             pickle_file,
             objects,

@@ -46,12 +46,14 @@ def evaluate_cmd(
     Example: wristmimic evaluate runs/RUN --protocol quick --noise initial-state -o reports/eval/RUN-quick
     """
     from wristmimic.evaluate import EvalInterrupted, evaluate_policy, load_eval_policy, load_protocol
+    from wristmimic.safe_io import check_output_folder
 
     with user_errors():
         proto = load_protocol(protocol)
         policy = load_eval_policy(run)
         run_dir = Path(policy.metadata["run_dir"])
         target = out or run_dir / "eval" / proto.name
+        check_output_folder(target, "--out" if out else None)
         try:
             r = evaluate_policy(
                 policy, proto, target, trials=trials, noise=noise, seed=seed, num_envs=num_envs, nthread=nthread,

@@ -24,7 +24,9 @@ def report_cmd(
     Example: wristmimic report runs --split omomo20 --split parahome20 -o reports/paper --title "Paper splits"
     """
     from wristmimic.report import build_report
+    from wristmimic.safe_io import check_output_folder
 
     with user_errors():
+        check_output_folder(out)
         r = build_report(eval_dirs, out, title, split or None)
         typer.echo(f"{r.out}: {r.scenes} scene(s), {r.trials:,} trials -> {', '.join(r.files)}")

@@ -21,8 +21,10 @@ def scene_cmd(
 
     Example: wristmimic scene datasets/omomo.h5 sub2_largetable_000 -o scene.xml
     """
+    from wristmimic.safe_io import check_output_file
     from wristmimic.scene import SceneConfig, export_scene_xml
 
     with user_errors():
+        check_output_file(out)
         p = export_scene_xml(dataset, sequence, out, SceneConfig(timestep=timestep, substeps=substeps))
     typer.echo(f"wrote {p}")

@@ -51,6 +51,7 @@ def train_cmd(
     """
     from wristmimic.rl.config import preset as make_preset
     from wristmimic.rl.train import TrainSpec, default_run_dir, resume_run, start_run
+    from wristmimic.safe_io import check_output_folder
 
     with user_errors():
         if resume is not None:
@@ -63,6 +64,7 @@ def train_cmd(
             raise InputError(None, "DATASET", "missing", "a canonical .h5 file (or --resume RUN_DIR)")
         if not dataset.is_file():
             raise InputError(dataset, None, "file not found")
+        check_output_folder(out)
         ppo = make_preset(preset, max_frames=max_frames, num_envs=num_envs)
         for sid in _scenes(dataset, scene, scenes):
             spec = TrainSpec(

@@ -35,12 +35,14 @@ def view_cmd(
 
     Example: wristmimic view runs/RUN/checkpoint.pt --trial-seed 3 -o trial3.rrd
     """
+    from wristmimic.safe_io import check_output_file
     from wristmimic.view.record import record_reference
     from wristmimic.view.run import RunViewOptions, record_run, source_kind
 
     with user_errors():
         if out.suffix != ".rrd":
             raise InputError(out, None, "not an .rrd file name", "FILE.rrd")
+        check_output_file(out)
         if trial_seed is not None and deterministic:
             raise InputError(None, "--deterministic", "conflicts with --trial-seed", "one of them")
         if source_kind(source) == "dataset":

@@ -17,6 +17,7 @@ import contextlib
 import hashlib
 import logging
 import re
+import sys
 import warnings
 import xml.etree.ElementTree as ET
 import xml.parsers.expat
@@ -190,12 +191,27 @@ def _unique(paths: list[Path]) -> list[Path]:
     return out
 
 
-def read_urdf(urdf_path: Path) -> tuple[Path, dict]:
+_FALLBACKS_SHOWN: set[tuple[Path, Path]] = set()
+
+
+def _warn_fallback(urdf_path: Path, meshes: list[ET.Element], used: Path) -> None:
+    """One ``warning:`` line on stderr (once per URDF and process) when the URDF's own mesh files are missing."""
+    key = (urdf_path.resolve(), used.resolve())
+    if key in _FALLBACKS_SHOWN:
+        return
+    _FALLBACKS_SHOWN.add(key)
+    names = ", ".join(dict.fromkeys(str(m.get("filename")) for m in meshes if m.get("filename")))
+    print(f"warning: {urdf_path}: mesh: {names} not found; using {used}", file=sys.stderr, flush=True)
+
+
+def read_urdf(urdf_path: Path, *, warn: bool = True) -> tuple[Path, dict]:
     """Parse a URDF: (resolved mesh path, numeric properties).
 
     The mesh is the first ``<mesh filename=...>`` of the first link that has one (visual before collision);
     each filename is tried relative to the URDF's folder, then its parent; then the layouts
-    ``<dir>/<stem>/<stem>.obj`` and ``<dir>/<stem>.obj`` (``<stem>`` = URDF file name without suffix).
+    ``<dir>/<stem>/<stem>.obj`` and ``<dir>/<stem>.obj`` (``<stem>`` = URDF file name without suffix). When
+    the URDF names meshes and none of them exists, the layout's file is used with one ``warning:`` line on stderr
+    if ``warn`` (SkillMimic's ``pot.urdf`` names ParaHome's ``pot/base_visual.obj``; the release ships ``pot.obj``).
 
     Property keys (present only when the URDF states them; floats unless noted):
     ``lateral_friction``, ``rolling_friction``, ``spinning_friction`` and ``contact_<tag>`` for any other
@@ -222,10 +238,12 @@ def read_urdf(urdf_path: Path) -> tuple[Path, dict]:
             tried.append(rel)
         else:
             tried += [urdf_path.parent / rel, urdf_path.parent.parent / rel]
-    tried += _layout_candidates(urdf_path.parent, urdf_path.stem)
-    tried = _unique(tried)
+    named = _unique(tried)
+    tried = _unique([*named, *_layout_candidates(urdf_path.parent, urdf_path.stem)])
     for candidate in tried:
         if candidate.is_file():
+            if warn and named and candidate not in named:
+                _warn_fallback(urdf_path, meshes, candidate)  # the URDF names files that are not there
             return candidate, props
     raise InputError(
         urdf_path, "mesh", f"no mesh file found; tried {', '.join(str(p) for p in tried)}", "an existing OBJ"
@@ -237,13 +255,14 @@ def _check_name(objects_dir: Path, name: str) -> None:
         raise InputError(objects_dir, "name", f"invalid object name {name!r}", "a plain file stem")
 
 
-def find_object_files(objects_dir: Path, name: str) -> tuple[Path | None, Path]:
-    """(URDF path or None, mesh path) of object ``name`` in ``objects_dir`` (either layout)."""
+def find_object_files(objects_dir: Path, name: str, *, warn: bool = True) -> tuple[Path | None, Path]:
+    """(URDF path or None, mesh path) of object ``name`` in ``objects_dir`` (either layout); ``warn``: as
+    :func:`read_urdf`."""
     objects_dir = Path(objects_dir)
     _check_name(objects_dir, name)
     urdf = objects_dir / f"{name}.urdf"
     if urdf.is_file():
-        return urdf, read_urdf(urdf)[0]
+        return urdf, read_urdf(urdf, warn=warn)[0]
     tried = _layout_candidates(objects_dir, name)
     for candidate in tried:
         if candidate.is_file():
@@ -266,7 +285,7 @@ def list_objects(objects_dir: Path) -> list[str]:
     found = []
     for name in sorted(names):
         try:
-            find_object_files(objects_dir, name)
+            find_object_files(objects_dir, name, warn=False)  # listing only: warn when an object is loaded
         except InputError:
             continue
         found.append(name)
@@ -278,7 +297,7 @@ def list_objects(objects_dir: Path) -> list[str]:
 
 @contextlib.contextmanager
 def _quiet() -> Iterator[None]:
-    """Silence trimesh's log messages and numpy warnings (this module prints nothing)."""
+    """Silence trimesh's log messages and numpy warnings (this module prints only the mesh fallback warning)."""
     logger = logging.getLogger("trimesh")
     level = logger.level
     logger.setLevel(logging.CRITICAL)
@@ -459,7 +478,7 @@ def load_object(
     urdf_path, mesh_path = find_object_files(objects_dir, name)
     props: dict[str, Any] = {}
     if urdf_path is not None:
-        _, props = read_urdf(urdf_path)
+        _, props = read_urdf(urdf_path, warn=False)  # find_object_files has warned
     return asset_from_mesh(name, mesh_path, urdf_path, props, density, n_surface, surface_seed)
 
 

@@ -11,7 +11,8 @@ from typing import Any, Protocol
 
 import torch
 
-from wristmimic.safe_io import sha256_file
+from wristmimic.errors import InputError
+from wristmimic.safe_io import first_sentence, sha256_file
 
 POLICY_ROW_BLOCK = 64
 """Policy batches are padded to a multiple of this many rows. MKL's matrix product gives a row bits that depend
@@ -74,7 +75,16 @@ def load_eval_policy(run_dir_or_checkpoint: str | Path) -> RunPolicy:
 
     path = Path(run_dir_or_checkpoint)
     ckpt = checkpoint_path(path)
-    p = load_policy(path)
+    try:
+        p = load_policy(path)  # load_checkpoint has checked the entries; this catches weights that do not fit
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
+        detail = first_sentence(str(exc), 240) or type(exc).__name__
+        raise InputError(
+            ckpt,
+            "policy",
+            f"cannot be rebuilt ({type(exc).__name__}: {detail})",
+            "a checkpoint written by `wristmimic train`",
+        ) from None
     cfg = p.config
     meta = {
         "scene": p.scene_id,

@@ -118,8 +118,11 @@ def read_metrics(run_dir: str | Path | None) -> pd.DataFrame | None:
     f = Path(run_dir) / "metrics.csv"
     if not f.is_file():
         return None
-    with open(f, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with open(f, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return None
 
     def num(v: str | None) -> float:
         try:

@@ -24,7 +24,7 @@ import pandas as pd
 from wristmimic.errors import InputError
 from wristmimic.report import plots
 from wristmimic.report import tables as T
-from wristmimic.safe_io import atomic_output
+from wristmimic.safe_io import atomic_output, check_output_folder
 
 
 @dataclass
@@ -61,6 +61,7 @@ def build_report(
     ``splits`` (names in ``eval/splits`` or paths): keep only their scenes, label datasets by split, and report
     which listed scenes have no evaluation. Without it, the splits the evaluations recorded are used for that.
     """
+    check_output_folder(out, None)
     ev = T.load_evals(eval_dirs)
     t = ev.trials
     if splits:
@@ -71,7 +72,10 @@ def build_report(
         used = [T.load_split(n) for n in sorted(set(t["split"]) - {""})]
     cover = T.coverage(t, used)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(out, None, f"cannot make the report folder ({exc.strerror or type(exc).__name__})") from None
     res = ReportResult(out, trials=len(t), scenes=t["scene"].nunique())
     scene_t, dataset_t, paper_t = T.per_scene(t), T.per_dataset(t), T.paper_table(t)
     term_t = T.terminations(t)

@@ -20,7 +20,7 @@ from wristmimic.errors import InputError
 from wristmimic.evaluate.metrics import TRIAL_COLUMNS, wilson_interval
 from wristmimic.evaluate.protocol import Split, load_split
 from wristmimic.evaluate.runner import DATASET_LABELS, EVAL_FORMAT, METHOD_LABELS, TERMINATION_NAMES
-from wristmimic.safe_io import atomic_output
+from wristmimic.safe_io import atomic_output, first_sentence
 
 FLOAT_FORMAT = "%.4f"
 LABEL_COLUMNS = ["dataset_label", "dataset", "split", "method", "variant", "protocol", "hand"]
@@ -83,18 +83,73 @@ def find_eval_dirs(paths: list[Path]) -> list[Path]:
     return sorted(dict.fromkeys(found))
 
 
+def _json_kind(value: object) -> str:
+    return {dict: "object", list: "list", str: "string", bool: "boolean"}.get(type(value), type(value).__name__)
+
+
+def read_summary(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """An evaluation's ``summary.json`` and its first scene row; one-line :class:`InputError` when it is not one."""
+    expected = "the summary.json `wristmimic evaluate` writes"
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputError(path, None, f"cannot be read ({exc.strerror or type(exc).__name__})") from None
+    except UnicodeDecodeError:
+        raise InputError(path, "<file>", "not UTF-8 text", expected) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(path, None, f"not valid JSON ({exc.msg})") from None
+    if not isinstance(doc, dict):
+        raise InputError(path, "<root>", f"holds a JSON {_json_kind(doc)}", "a JSON object: " + expected)
+    if doc.get("format") != EVAL_FORMAT:
+        raise InputError(path, "format", "not a wristmimic evaluation summary")
+    scenes = doc.get("scenes")
+    if not isinstance(scenes, list) or not scenes or not isinstance(scenes[0], dict):
+        got = (
+            "missing"
+            if scenes is None
+            else f"holds {'an empty list' if scenes == [] else 'a JSON ' + _json_kind(scenes)}"
+        )
+        raise InputError(path, "scenes", got, "a list of scene summaries (objects)")
+    row = scenes[0]
+    for key in ("scene", "method"):
+        value = row.get(key)
+        if not isinstance(value, str) or not value:
+            raise InputError(path, f"scenes[0].{key}", "missing" if value is None else f"holds {value!r}", "a name")
+    if "/" in row["scene"] or "\\" in row["scene"] or row["scene"] in (".", ".."):
+        raise InputError(path, "scenes[0].scene", f"{row['scene']!r} is not a plain name", "a sequence id")
+    policy = doc.get("policy", {})
+    if not isinstance(policy, dict) or not isinstance(policy.get("run_dir", ""), str | None):
+        raise InputError(path, "policy", "not an object with a run_dir string", expected)
+    return doc, row
+
+
+def read_trials(path: Path) -> pd.DataFrame:
+    """An evaluation's per-trial table with :data:`TRIAL_COLUMNS` in their types; one-line errors otherwise."""
+    try:
+        df = pd.read_parquet(path)
+    except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid is a ValueError; I/O errors are OSErrors
+        reason = first_sentence(str(exc).split("': ", 1)[-1]) or type(exc).__name__
+        raise InputError(
+            path, "<file>", f"not a readable parquet file ({reason})", "the trial table `wristmimic evaluate` wrote"
+        ) from None
+    missing = [c for c in TRIAL_COLUMNS if c not in df.columns]
+    if missing:
+        raise InputError(path, missing[0], "column missing", "a wristmimic trial table")
+    df = df[list(TRIAL_COLUMNS)].copy()
+    for col, dtype in TRIAL_COLUMNS.items():
+        try:
+            df[col] = df[col].astype(dtype)
+        except (TypeError, ValueError):
+            raise InputError(path, col, f"values of type {df[col].dtype}", f"{dtype} values") from None
+    return df
+
+
 def load_evals(paths: list[Path]) -> EvalSet:
     """Read the trial tables and labels of evaluation folders; one-line errors for mixed or duplicate inputs."""
     frames, sources = [], []
     seen: dict[tuple[str, str], Path] = {}
     for d in find_eval_dirs(paths):
-        try:
-            doc = json.loads((d / "summary.json").read_text())
-        except json.JSONDecodeError as exc:
-            raise InputError(d / "summary.json", None, f"not valid JSON ({exc.msg})") from None
-        if doc.get("format") != EVAL_FORMAT or not doc.get("scenes"):
-            raise InputError(d / "summary.json", "format", "not a wristmimic evaluation summary")
-        row = doc["scenes"][0]
+        doc, row = read_summary(d / "summary.json")
         scene = row["scene"]
         key = (row["method"], scene)
         if key in seen:
@@ -105,11 +160,7 @@ def load_evals(paths: list[Path]) -> EvalSet:
         pq = d / f"{scene}.parquet"
         if not pq.is_file():
             raise InputError(pq, None, "trial table missing", "the folder as `wristmimic evaluate` wrote it")
-        df = pd.read_parquet(pq)
-        missing = [c for c in TRIAL_COLUMNS if c not in df.columns]
-        if missing:
-            raise InputError(pq, missing[0], "column missing", "a wristmimic trial table")
-        df = df[list(TRIAL_COLUMNS)].astype(TRIAL_COLUMNS)
+        df = read_trials(pq)
         for c in LABEL_COLUMNS:
             df[c] = str(row.get(c, ""))
         frames.append(df)

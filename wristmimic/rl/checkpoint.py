@@ -3,7 +3,7 @@ and JSON text only), plus the random-number-generator states a bit-for-bit resum
 
 from __future__ import annotations
 
-import pickle
+import json
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 from wristmimic.errors import InputError
-from wristmimic.safe_io import atomic_output
+from wristmimic.safe_io import atomic_output, torch_load_untrusted
 
 CHECKPOINT_NAME = "checkpoint.pt"
 CHECKPOINT_FORMAT = "wristmimic-ppo-checkpoint"
@@ -33,18 +33,78 @@ def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
         torch.save({"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, **state}, tmp)
 
 
-def load_checkpoint(run_dir_or_file: str | Path) -> dict[str, Any]:
-    """Load a checkpoint on the CPU without running code from the file."""
-    path = checkpoint_path(run_dir_or_file)
+_EXPECTED = "a checkpoint written by `wristmimic train`"
+_STATE_TYPES: dict[str, tuple[type, ...]] = {
+    "config": (str,),
+    "metadata": (dict,),
+    "policy": (dict,),
+    "iteration": (int,),
+    "frames": (int,),
+    "seconds": (int, float),
+    "optimizer": (dict,),
+    "rng": (dict,),
+    "env": (dict,),
+    "obs": (torch.Tensor,),
+    "episodes": (dict,),
+    "storage_step": (int,),
+}
+"""Entries every checkpoint has (``Runner.state_dict``) and the types readers rely on."""
+_CONFIG_KEYS = ("ppo", "env", "dataset")
+_METADATA_TYPES: dict[str, tuple[type, ...]] = {
+    "scene": (str,),
+    "variant": (str,),
+    "dataset_sha256": (str,),
+    "seed": (int,),
+}
+
+
+def _kind(value: object) -> str:
+    return "nothing" if value is None else f"a {type(value).__name__}"
+
+
+def _check_state(path: Path, state: dict[str, Any]) -> None:
+    """One-line :class:`InputError` for a checkpoint that lacks what evaluate, view or resume read."""
+    for key, types in _STATE_TYPES.items():
+        if key not in state:
+            raise InputError(path, key, "missing", _EXPECTED)
+        if not isinstance(state[key], types):
+            raise InputError(path, key, f"holds {_kind(state[key])}", f"{' or '.join(t.__name__ for t in types)}")
     try:
-        state = torch.load(path, weights_only=True, map_location="cpu")
-    except (pickle.UnpicklingError, RuntimeError, EOFError, OSError) as exc:
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
-        raise InputError(path, None, f"cannot be loaded ({first})", "a wristmimic checkpoint") from None
+        config = json.loads(state["config"])
+    except json.JSONDecodeError as exc:
+        raise InputError(path, "config", f"not valid JSON ({exc.msg})", "the run's config.json text") from None
+    if not isinstance(config, dict):
+        raise InputError(path, "config", f"holds a JSON {type(config).__name__}", "a JSON object")
+    for key in _CONFIG_KEYS:
+        if not isinstance(config.get(key), dict):
+            raise InputError(path, f"config.{key}", "missing" if key not in config else "not an object", _EXPECTED)
+    for key in ("path", "sha256"):
+        if not isinstance(config["dataset"].get(key), str):
+            raise InputError(path, f"config.dataset.{key}", "missing or not a string", _EXPECTED)
+    for key, types in _METADATA_TYPES.items():
+        if not isinstance(state["metadata"].get(key), types):
+            raise InputError(
+                path, f"metadata.{key}", "missing" if key not in state["metadata"] else "wrong type", _EXPECTED
+            )
+    weights = state["policy"]
+    bad = next((k for k, v in weights.items() if not isinstance(v, torch.Tensor)), None)
+    if bad is not None:
+        raise InputError(path, f"policy.{bad}", f"holds {_kind(weights[bad])}", "a tensor")
+    for keys in (("normalizer.mean",), ("log_std_param", "log_std")):
+        if not any(k in weights for k in keys):
+            raise InputError(path, f"policy.{keys[0]}", "missing", "the policy network's weights")
+
+
+def load_checkpoint(run_dir_or_file: str | Path) -> dict[str, Any]:
+    """Load a checkpoint on the CPU without running code from the file; one-line :class:`InputError` for a file
+    that is not a complete wristmimic checkpoint (text, random bytes, a refused pickle, a missing config, ...)."""
+    path = checkpoint_path(run_dir_or_file)
+    state = torch_load_untrusted(path, _EXPECTED)
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise InputError(path, "format", "not a wristmimic PPO checkpoint")
+        raise InputError(path, "format", "not a wristmimic PPO checkpoint", _EXPECTED)
     if state.get("version") != CHECKPOINT_VERSION:
         raise InputError(path, "version", f"version {state.get('version')}", f"version {CHECKPOINT_VERSION}")
+    _check_state(path, state)
     return state
 
 
