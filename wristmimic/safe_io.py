@@ -70,8 +70,8 @@ def is_write_failure(exc: BaseException, *paths: str | Path) -> bool:
         return False
     if exc.errno in _WRITE_ERRNOS:
         return True
-    named = {os.fspath(p) for p in paths}
-    return any(f is not None and os.fspath(f) in named for f in (exc.filename, exc.filename2))
+    named = {str(p) for p in paths}
+    return any(f is not None and str(f) in named for f in (exc.filename, exc.filename2))
 
 
 def _pid_running(pid: int) -> bool:
