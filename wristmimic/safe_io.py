@@ -3,18 +3,22 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import os
 import pickle
 import re
+import socket
+import sys
 import tempfile
+import time
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 
-from wristmimic.errors import InputError
+from wristmimic.errors import InputError, WristmimicError
 
 
 def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
@@ -29,31 +33,160 @@ def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
+#: errno values that mean "the data could not be stored" wherever they come from.
+_WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS})
+#: Temporary files whose writer cannot be checked (another host, or named before the pid was embedded) are
+#: removed when untouched for this long.
+STALE_AFTER_S = 24 * 3600.0
+_HOST = re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname())[:40] or "host"
+_RAND = r"[a-z0-9_]{8}"  # the random part tempfile.mkstemp adds
+_OWNED_TMP = re.compile(rf"(?P<host>[A-Za-z0-9_-]+)-(?P<pid>\d+)\.{_RAND}(?:\.\w+)?")
+_LEGACY_TMP = re.compile(rf"{_RAND}(?:\.\w+)?")
+
+
+class OutputError(WristmimicError):
+    """An output could not be written (disk full, quota, file size limit, I/O error).
+
+    The message is one line: ``<file>: could not write (<reason>)``.
+    """
+
+    def __init__(self, path: str | Path, reason: str):
+        self.path, self.reason = str(path), reason
+        super().__init__(f"{path}: could not write ({reason})")
+
+    @classmethod
+    def from_os(cls, path: str | Path, exc: OSError) -> OutputError:
+        """The error for ``exc`` raised while writing ``path`` (reason: the errno's text, else the message)."""
+        if exc.errno:
+            reason = os.strerror(exc.errno)
+        else:
+            reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+        return cls(path, reason)
+
+
+def is_write_failure(exc: BaseException, *paths: str | Path) -> bool:
+    """Whether ``exc`` is an :class:`OSError` from storing data: disk full, quota, file too large, I/O error,
+    read-only file system, or any OSError naming one of ``paths``."""
+    if not isinstance(exc, OSError):
+        return False
+    if exc.errno in _WRITE_ERRNOS:
+        return True
+    named = {str(p) for p in paths}
+    return any(f is not None and str(f) in named for f in (exc.filename, exc.filename2))
+
+
+def _pid_running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    except OSError:
+        return True  # cannot tell: keep the file
+    return True
+
+
+def _stale_reason(name: str, prefix: str, mtime: float) -> str | None:
+    """Why the temporary file ``name`` (beside an output whose temporaries start with ``prefix``) is stale, or
+    None if it is not a temporary of that output or its writer may still be running."""
+    if not (name.startswith(prefix) and name.endswith(".tmp")):
+        return None
+    middle = name[len(prefix) : -len(".tmp")]
+    owned = _OWNED_TMP.fullmatch(middle)
+    if owned:
+        host, pid = owned["host"], int(owned["pid"])
+        if host == _HOST:
+            if pid == os.getpid() or _pid_running(pid):
+                return None
+            return f"left by process {pid}, which is no longer running"
+    elif not _LEGACY_TMP.fullmatch(middle):
+        return None  # another output's temporary (its name starts the same)
+    age = time.time() - mtime
+    if age < STALE_AFTER_S:
+        return None
+    where = f"process {owned['pid']} on {owned['host']}" if owned else "an unknown process"
+    return f"left by {where}, untouched for {age / 3600:.0f} h"
+
+
+def remove_stale_temporaries(path: str | Path, report: Callable[[str], None] | None = None) -> list[Path]:
+    """Delete temporary files of ``path`` left beside it by killed writers; returns what was removed.
+
+    A temporary is ``.<name>.<host>-<pid>.<random><suffix>.tmp`` (see :func:`atomic_output`). It is stale when
+    its writer ran on this host and that process no longer exists; one from another host (whose process cannot
+    be checked), or without a pid (written by an older version), when untouched for :data:`STALE_AFTER_S`.
+    Each removal is reported in one line (default: on stderr).
+    """
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    prefix = f".{path.name}."
+    removed: list[Path] = []
+    try:
+        entries = [e for e in os.scandir(parent) if e.name.startswith(prefix) and e.name.endswith(".tmp")]
+    except OSError:
+        return removed
+    for entry in entries:
+        try:
+            why = _stale_reason(entry.name, prefix, entry.stat(follow_symlinks=False).st_mtime)
+            if why is None or not entry.is_file(follow_symlinks=False):
+                continue
+            os.unlink(entry.path)
+        except OSError:  # vanished meanwhile, or not ours to delete
+            continue
+        removed.append(parent / entry.name)
+        (report or _stderr)(f"removed stale temporary file {removed[-1]} ({why})")
+    return removed
+
+
+def _stderr(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _fsync(path: Path, *, directory: bool = False) -> None:
+    fd = os.open(path, os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
 
 @contextlib.contextmanager
 def atomic_output(path: str | Path, suffix: str = "") -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success rename it onto ``path``, on failure delete it.
+    """Yield a temporary path beside ``path``; on success sync it to disk and rename it onto ``path``, on
+    failure delete it.
 
-    Nothing half-written is ever left at ``path``. Raises :class:`InputError` if the folder is not writable.
+    Nothing half-written is ever left at ``path``. The temporary is ``.<name>.<host>-<pid>.<random><suffix>.tmp``
+    so that one left by a killed process is recognised: stale temporaries of ``path`` are removed (and reported on
+    stderr) first, see :func:`remove_stale_temporaries`. A failed write (disk full, quota, file size limit, I/O
+    error) raised inside the block or while syncing/renaming becomes :class:`OutputError` (one line); a folder
+    that is missing or not writable raises :class:`InputError`.
     """
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(path, None, f"output folder {parent} does not exist")
+    remove_stale_temporaries(path)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix + ".tmp", dir=parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=suffix + ".tmp", dir=parent)
     except OSError as exc:
+        if exc.errno in _WRITE_ERRNOS and exc.errno != errno.EROFS:  # no space (or inodes) left, I/O error
+            raise OutputError.from_os(path, exc) from None
         raise InputError(path, None, f"output folder is not writable ({exc.strerror})") from None
     os.close(fd)
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        _fsync(tmp_path)  # the data is on disk before the name points at it (no empty file after a power cut)
         os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp_path, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
             tmp_path.unlink()
+        if isinstance(exc, OSError) and is_write_failure(exc, tmp_path, path):
+            raise OutputError.from_os(path, exc) from None
         raise
+    with contextlib.suppress(OSError):  # persist the rename; some file systems refuse fsync on folders
+        _fsync(parent, directory=True)
 
 
 def load_pt_tensor(path: str | Path, *, ndim: int = 2) -> np.ndarray:

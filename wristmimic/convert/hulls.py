@@ -28,6 +28,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from wristmimic.errors import InputError
+from wristmimic.safe_io import OutputError
 
 #: Bumped whenever the post-processing of coacd's output changes (part of the cache key).
 _POSTPROCESS_VERSION = 1
@@ -443,5 +444,8 @@ def convex_decompose(
         mesh_sha256=mesh_hash,
     )
     if use_cache:
-        _write_cache(path, key, mesh_hash, params, version, hs)
+        try:
+            _write_cache(path, key, mesh_hash, params, version, hs)
+        except OSError as exc:  # full disk, quota, read-only cache folder: one line, not a traceback
+            raise OutputError.from_os(path, exc) from None
     return hs

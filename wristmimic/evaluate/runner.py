@@ -8,15 +8,21 @@ Output folder (default ``<run_dir>/eval/<protocol>``)::
     summary.json, summary.csv         per-scene success rate (Wilson 95 % interval), errors, terminations
     timing.json                       wall time and trials/s of the last session (the only non-deterministic file)
 
-A rerun of the same command resumes after the last contiguous completed trial; because every trial is a pure
-function of its seed, the final files are identical to an uninterrupted run.
+A rerun of the same command runs only the trials no part file holds (a part that is truncated or corrupt, e.g.
+after a power cut, is said on stderr, deleted and recomputed; intact parts are never rewritten); because every
+trial is a pure function of its seed, the final files are identical to an uninterrupted run. A failed write (disk
+full, quota, file size limit) stops with a one-line :class:`~wristmimic.safe_io.OutputError`: the parts already
+written stay, the final table and summaries are written together or not at all.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
 import re
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -33,7 +39,7 @@ from wristmimic.evaluate.metrics import TRIAL_COLUMNS, wilson_interval
 from wristmimic.evaluate.policy import EvalPolicy
 from wristmimic.evaluate.protocol import NOISE_MODES, Protocol, Split, available, load_split
 from wristmimic.evaluate.trials import Records, TrialSettings, make_env, run_trials
-from wristmimic.safe_io import atomic_output, sha256_file
+from wristmimic.safe_io import OutputError, atomic_output, is_write_failure, sha256_file
 from wristmimic.sim.backend import BACKENDS
 
 EVAL_FORMAT, EVAL_VERSION = "wristmimic-eval", 1
@@ -133,21 +139,69 @@ def _settings_dict(
 _PART = re.compile(r"^trials-(\d{8})-(\d{8})\.parquet$")
 
 
-def completed_parts(folder: Path) -> list[tuple[int, int, Path]]:
-    """The contiguous chain of part files from trial 0: [(start, stop, path)]."""
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _damaged(exc: BaseException) -> str:
+    first = (str(exc).strip().splitlines() or [""])[0][:120]
+    return f"truncated or corrupt ({type(exc).__name__}: {first})"
+
+
+def _part_problem(path: Path, start: int, stop: int) -> str | None:
+    """Why the part file ``path`` (trials ``start .. stop - 1``) cannot be used, or None if it is intact."""
+    try:
+        df = pd.read_parquet(path)
+    except OSError as exc:
+        if exc.errno is not None:  # the file system failed (permission, I/O error), not the file: keep it
+            raise InputError(path, None, f"cannot be read ({os.strerror(exc.errno)})", "a readable part file") from None
+        return _damaged(exc)  # pyarrow's own "I/O" errors: a corrupt page, footer or thrift header
+    except Exception as exc:  # noqa: BLE001 - truncated, empty, not parquet: all mean "run these trials again"
+        return _damaged(exc)
+    missing = [c for c in TRIAL_COLUMNS if c not in df.columns]
+    if missing:
+        return f"lacks column(s) {', '.join(missing)}"
+    if df["trial"].tolist() != list(range(start, stop)):
+        return f"holds {len(df)} rows, not trials {start}-{stop - 1}"
+    return None
+
+
+def scan_parts(
+    folder: Path, n_trials: int, say: Callable[[str], None] = _say
+) -> tuple[list[tuple[int, int, Path]], list[tuple[int, int]]]:
+    """The intact part files that cover trials ``0 .. n_trials - 1`` in order ([(start, stop, path)]), and the
+    ranges no intact part covers ([(start, stop)], the trials still to run).
+
+    Every part is read back; one that is truncated or corrupt is reported through ``say`` (one line) and
+    deleted, so that its trials are run again. Intact parts are kept, also those after a gap.
+    """
     parts: dict[int, tuple[int, Path]] = {}
-    for p in folder.glob("trials-*.parquet") if folder.is_dir() else []:
+    for p in sorted(folder.glob("trials-*.parquet")) if folder.is_dir() else []:
         m = _PART.match(p.name)
-        if m:
-            a, b = int(m.group(1)), int(m.group(2))
-            if b > a and b > parts.get(a, (0, p))[0]:
-                parts[a] = (b, p)
-    chain, at = [], 0
-    while at in parts:
-        b, p = parts[at]
-        chain.append((at, b, p))
-        at = b
-    return chain
+        if not m or int(m.group(2)) <= int(m.group(1)):
+            continue
+        a, b = int(m.group(1)), int(m.group(2))
+        problem = _part_problem(p, a, b)
+        if problem:
+            say(f"{p}: {problem}; deleted, trials {a}-{b - 1} will be run again")
+            with contextlib.suppress(FileNotFoundError):
+                p.unlink()
+            continue
+        if b > parts.get(a, (0, p))[0]:
+            parts[a] = (b, p)
+    chain: list[tuple[int, int, Path]] = []
+    gaps: list[tuple[int, int]] = []
+    at = 0
+    while at < n_trials:
+        if at in parts:
+            b, p = parts[at]
+            chain.append((at, b, p))
+            at = b
+            continue
+        nxt = min([a for a in parts if a > at] + [n_trials])
+        gaps.append((at, nxt))
+        at = nxt
+    return chain, gaps
 
 
 def _frame(records: list[Records], scene: str, noise: str) -> pd.DataFrame:
@@ -163,7 +217,7 @@ class _ChunkWriter:
 
     def __init__(self, folder: Path, scene: str, noise: str, start: int, stop: int, chunk: int):
         self.folder, self.scene, self.noise = folder, scene, noise
-        self.flushed, self.stop, self.chunk = start, stop, chunk
+        self.start, self.flushed, self.stop, self.chunk = start, start, stop, chunk
         self.pending: dict[int, Records] = {}
         self.on_advance: Callable[[int], None] = lambda n: None
 
@@ -214,7 +268,16 @@ def summarize(df: pd.DataFrame, info: dict[str, Any]) -> dict[str, Any]:
 
 
 def write_summary(out: Path, row: dict[str, Any], settings: dict[str, Any], policy_meta: dict[str, Any]) -> None:
-    """``summary.json`` (settings, policy, the row) and ``summary.csv`` (the row), both deterministic."""
+    """``summary.json`` (settings, policy, the row) and ``summary.csv`` (the row), both deterministic; written
+    together or not at all."""
+    with contextlib.ExitStack() as stack:
+        _write_summary(stack, out, row, settings, policy_meta)
+
+
+def _write_summary(
+    stack: contextlib.ExitStack, out: Path, row: dict[str, Any], settings: dict[str, Any], policy_meta: dict[str, Any]
+) -> None:
+    """:func:`write_summary` into temporary files that ``stack`` renames into place when it closes."""
     keep = (
         "scene",
         "variant",
@@ -233,11 +296,30 @@ def write_summary(out: Path, row: dict[str, Any], settings: dict[str, Any], poli
         "policy": {k: policy_meta[k] for k in keep if k in policy_meta},
         "scenes": [row],
     }
-    with atomic_output(out / "summary.json") as tmp:
-        tmp.write_text(json.dumps(doc, indent=2, sort_keys=True, allow_nan=True) + "\n")
+    tmp = stack.enter_context(atomic_output(out / "summary.json"))
+    tmp.write_text(json.dumps(doc, indent=2, sort_keys=True, allow_nan=True) + "\n")
     frame = pd.DataFrame([row])[SUMMARY_COLUMNS]
-    with atomic_output(out / "summary.csv") as tmp:
-        frame.to_csv(tmp, index=False, float_format="%.6f", lineterminator="\n")
+    tmp = stack.enter_context(atomic_output(out / "summary.csv"))
+    frame.to_csv(tmp, index=False, float_format="%.6f", lineterminator="\n")
+
+
+def _make_folder(path: Path) -> list[Path]:
+    """Create ``path`` and its missing parents; returns those created (outermost first)."""
+    created = [p for p in (path, *path.parents) if not p.exists()][::-1]
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        _remove_empty(created)
+        if is_write_failure(exc):
+            raise OutputError.from_os(path, exc) from None
+        raise InputError(path, None, f"cannot create the output folder ({exc.strerror or exc})") from None
+    return created
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for p in reversed(folders):
+        with contextlib.suppress(OSError):
+            p.rmdir()
 
 
 def _check_dataset(meta: dict[str, Any], dataset: Path) -> tuple[str, str]:
@@ -298,10 +380,15 @@ def evaluate_policy(
     env_dict = _env_dict(meta.get("env"))
     expected = _settings_dict(protocol, policy, settings, env_dict, backend)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    created = _make_folder(out)
     manifest = out / "eval.json"
     if manifest.is_file():
-        old = json.loads(manifest.read_text())
+        try:
+            old = json.loads(manifest.read_text())
+        except (OSError, ValueError) as exc:
+            raise InputError(
+                manifest, None, f"cannot be read ({type(exc).__name__})", "the settings of an evaluation, or delete it"
+            ) from None
         diff = sorted(k for k in set(old) | set(expected) if old.get(k) != expected.get(k))
         if diff:
             raise InputError(
@@ -311,19 +398,22 @@ def evaluate_policy(
                 "another --out, or delete it",
             )
     else:
-        with atomic_output(manifest) as tmp:
-            tmp.write_text(json.dumps(expected, indent=2, sort_keys=True) + "\n")
+        try:
+            with atomic_output(manifest) as tmp:
+                tmp.write_text(json.dumps(expected, indent=2, sort_keys=True) + "\n")
+        except OutputError:
+            _remove_empty(created)  # nothing of this evaluation is left behind
+            raise
     scene = meta["scene"]
     parts_dir = out / "parts" / scene
-    parts_dir.mkdir(parents=True, exist_ok=True)
-    done = completed_parts(parts_dir)
-    start = done[-1][1] if done else 0
-    t0, frames, ran = time.perf_counter(), 0, 0
-    if start < n_trials:
-        writer = _ChunkWriter(parts_dir, scene, settings.noise, start, n_trials, chunk)
+    _make_folder(parts_dir)
+    done, gaps = scan_parts(parts_dir, n_trials)
+    todo = sum(b - a for a, b in gaps)
+    t0, frames = time.perf_counter(), 0
+    if gaps:
         env = make_env(
             meta,
-            min(num_envs, n_trials - start),
+            min(num_envs, max(b - a for a, b in gaps)),
             protocol.early_termination,
             nthread,
             ds_path,
@@ -332,30 +422,36 @@ def evaluate_policy(
         )
         if hasattr(policy, "to"):
             policy.to(env.device)  # type: ignore[attr-defined]
+        kept = n_trials - todo  # trials held by part files
+        writer: _ChunkWriter | None = None
         try:
-            with _progress(f"{scene} ({meta.get('variant', '')})", start, n_trials, progress) as advance:
+            with _progress(f"{scene} ({meta.get('variant', '')})", kept, n_trials, progress) as advance:
 
                 def advance_or_stop(n: int) -> None:
                     advance(n)
                     if should_stop is not None and should_stop():
                         raise KeyboardInterrupt
 
-                writer.on_advance = advance_or_stop
-                frames = run_trials(env, policy, settings, start, n_trials, writer)
+                for a, b in gaps:
+                    writer = _ChunkWriter(parts_dir, scene, settings.noise, a, b, chunk)
+                    writer.on_advance = advance_or_stop
+                    frames += run_trials(env, policy, settings, a, b, writer)
+                    kept += b - a
+                    writer = None
         except KeyboardInterrupt:
-            writer.flush()
-            raise EvalInterrupted(out, writer.flushed, n_trials) from None
+            if writer is not None:
+                writer.flush()
+                kept += writer.flushed - writer.start
+            raise EvalInterrupted(out, kept, n_trials) from None
         finally:
             env.close()
-        ran = n_trials - start
-        done = completed_parts(parts_dir)
+        done, gaps = scan_parts(parts_dir, n_trials)
+        if gaps:  # only if part files were deleted meanwhile
+            raise InputError(parts_dir, None, f"trials {gaps[0][0]}-{gaps[0][1] - 1} vanished", "their part files")
     seconds = time.perf_counter() - t0
     df = pd.concat([pd.read_parquet(p) for _, _, p in done], ignore_index=True)
     df = df[df["trial"] < n_trials].sort_values("trial", kind="stable").reset_index(drop=True)
     df = df[list(TRIAL_COLUMNS)].astype(TRIAL_COLUMNS)
-    parquet = out / f"{scene}.parquet"
-    with atomic_output(parquet, suffix=".parquet") as tmp:
-        df.to_parquet(tmp, index=False)
     info = {
         "scene": scene,
         "dataset": source,
@@ -369,16 +465,20 @@ def evaluate_policy(
     if hand:
         info["hand"] = hand
     row = summarize(df, info)
-    write_summary(out, row, expected | {"trials": n_trials}, meta)
     timing = {
         "seconds": seconds,
-        "trials_run": ran,
-        "trials_per_s": ran / seconds if ran and seconds else None,
+        "trials_run": todo,
+        "trials_per_s": todo / seconds if todo and seconds else None,
         "frames": frames,
     }
-    with atomic_output(out / "timing.json") as tmp:
+    parquet = out / f"{scene}.parquet"
+    with contextlib.ExitStack() as stack:  # the table, summaries and timing: all renamed into place, or none
+        tmp = stack.enter_context(atomic_output(parquet, suffix=".parquet"))
+        df.to_parquet(tmp, index=False)
+        _write_summary(stack, out, row, expected | {"trials": n_trials}, meta)
+        tmp = stack.enter_context(atomic_output(out / "timing.json"))
         tmp.write_text(json.dumps(timing, indent=2, sort_keys=True) + "\n")
-    return EvalResult(out, row, ran, seconds, frames, parquet)
+    return EvalResult(out, row, todo, seconds, frames, parquet)
 
 
 def _env_dict(env: Any) -> dict[str, Any]:

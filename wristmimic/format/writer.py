@@ -1,9 +1,18 @@
-"""Writing canonical files: everything goes to a temporary file that is renamed into place on success."""
+"""Writing canonical files: everything goes to a temporary file that is renamed into place on success.
+
+HDF5 (2.0, h5py 3.16) must never see a failed write: after one, flushing or closing the file crashes the process
+(segmentation fault, after pages of ignored errors from h5py object destructors). The file is therefore written
+through :class:`GuardedFile` (h5py's ``fileobj`` driver), which keeps the first OS error to itself and drops the
+writes after it; :class:`DatasetWriter` checks it after every record and on close, closes the HDF5 file cleanly,
+deletes the temporary file and raises :class:`~wristmimic.safe_io.OutputError` (one line).
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
+import os
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
@@ -15,9 +24,81 @@ import numpy as np
 from wristmimic import __version__
 from wristmimic.format import schema
 from wristmimic.format.records import HumanoidRecord, ObjectRecord, SequenceRecord
-from wristmimic.safe_io import atomic_output
+from wristmimic.safe_io import OutputError, atomic_output
 
 _STR = h5py.string_dtype()
+
+
+class GuardedFile:
+    """An unbuffered binary file for h5py's ``fileobj`` driver that never reports a failed write to HDF5.
+
+    The first :class:`OSError` of a write or truncate is kept in :attr:`error`; that write and every later one are
+    dropped (reported as done). Reads return what reached the file, zero-filled past its end as HDF5's own POSIX
+    driver does.
+    """
+
+    def __init__(self, path: str | Path):
+        """Create (or empty) the file at ``path``."""
+        self._fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_TRUNC | getattr(os, "O_BINARY", 0), 0o600)
+        self._pos = 0
+        self._end = 0
+        self.error: OSError | None = None
+
+    def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
+        base = {os.SEEK_SET: 0, os.SEEK_CUR: self._pos, os.SEEK_END: self._end}[whence]
+        self._pos = base + offset
+        return self._pos
+
+    def tell(self) -> int:
+        return self._pos
+
+    def readinto(self, buf: Any) -> int:
+        view = memoryview(buf).cast("B")
+        data = os.pread(self._fd, len(view), self._pos)
+        view[: len(data)] = data
+        view[len(data) :] = bytes(len(view) - len(data))
+        self._pos += len(view)
+        return len(view)
+
+    def read(self, size: int = -1) -> bytes:
+        size = max(self._end - self._pos, 0) if size is None or size < 0 else size
+        buf = bytearray(size)
+        self.readinto(buf)
+        return bytes(buf)
+
+    def write(self, data: Any) -> int:
+        view = memoryview(data).cast("B")
+        if self.error is None:
+            try:
+                done = 0
+                while done < len(view):
+                    n = os.pwrite(self._fd, view[done:], self._pos + done)
+                    if n <= 0:
+                        raise OSError(errno.EIO, os.strerror(errno.EIO))
+                    done += n
+            except OSError as exc:
+                self.error = exc
+        self._pos += len(view)
+        self._end = max(self._end, self._pos)
+        return len(view)
+
+    def truncate(self, size: int | None = None) -> int:
+        size = self._pos if size is None else size
+        if self.error is None:
+            try:
+                os.ftruncate(self._fd, size)
+            except OSError as exc:
+                self.error = exc
+        self._end = size
+        return size
+
+    def flush(self) -> None:
+        """Nothing to do: writes are not buffered."""
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
 
 
 def _json(obj: Any) -> str:
@@ -70,35 +151,65 @@ class DatasetWriter:
         self._index: list[tuple[str, int, str, str, str]] = []
         self._ctx: contextlib.AbstractContextManager[Path] | None = None
         self._f: h5py.File | None = None
+        self._sink: GuardedFile | None = None
 
     def __enter__(self) -> DatasetWriter:
         self._ctx = atomic_output(self.path)
         tmp = self._ctx.__enter__()
         try:
-            self._f = h5py.File(tmp, "w")
-        except BaseException:
-            self._ctx.__exit__(*__import__("sys").exc_info())
-            raise
-        for k, v in {
-            **self._attrs,
-            **{k: _json(v) if isinstance(v, dict | list) else v for k, v in self._extra.items()},
-        }.items():
-            self._f.attrs[k] = v
-        for g in ("humanoids", "objects", "sequences", "index"):
-            self._f.create_group(g)
+            self._sink = GuardedFile(tmp)
+            self._f = h5py.File(self._sink, "w")
+            for k, v in {
+                **self._attrs,
+                **{k: _json(v) if isinstance(v, dict | list) else v for k, v in self._extra.items()},
+            }.items():
+                self._f.attrs[k] = v
+            for g in ("humanoids", "objects", "sequences", "index"):
+                self._f.create_group(g)
+            self.check()
+        except BaseException as exc:
+            self._abort(exc)
         return self
 
     def __exit__(self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None) -> None:
-        assert self._f is not None and self._ctx is not None
-        try:
-            if et is None:
+        assert self._ctx is not None
+        if ev is None:
+            try:
+                self.check()
                 self._write_index()
-        finally:
-            self._f.close()
-            if et is None:
-                self._ctx.__exit__(None, None, None)
+                self._close()
+                self.check()
+            except BaseException as exc:
+                ev = exc
             else:
-                self._ctx.__exit__(et, ev, tb)
+                self._ctx.__exit__(None, None, None)  # sync and rename into place (OutputError if that fails)
+                return
+        self._abort(ev)
+
+    def check(self) -> None:
+        """Raise :class:`OutputError` if a write to the temporary file has failed (disk full, quota, ...)."""
+        if self._sink is not None and self._sink.error is not None:
+            raise OutputError.from_os(self.path, self._sink.error)
+
+    def _close(self) -> None:
+        """Close the HDF5 file (HDF5 flushes its caches through the guarded file), then the file itself."""
+        try:
+            if self._f is not None:
+                self._f.close()
+        finally:
+            if self._sink is not None:
+                self._sink.close()
+
+    def _abort(self, exc: BaseException) -> None:
+        """Close everything, delete the temporary file and raise :class:`OutputError` if a write failed (whatever
+        else went wrong then is a consequence), else ``exc``."""
+        with contextlib.suppress(Exception):
+            self._close()
+        if self._sink is not None and self._sink.error is not None and not isinstance(exc, KeyboardInterrupt):
+            exc = OutputError.from_os(self.path, self._sink.error)
+        assert self._ctx is not None
+        self._ctx.__exit__(type(exc), exc, exc.__traceback__)  # deletes the temporary file
+        raise exc
 
     @property
     def file(self) -> h5py.File:
@@ -113,6 +224,7 @@ class DatasetWriter:
         return oid in self.file["objects"]
 
     def add_humanoid(self, hid: str, h: HumanoidRecord) -> None:
+        self.check()
         g = self.file["humanoids"].create_group(hid)
         g.attrs.update({"name": h.name, "family": h.family, "source_file": h.source_file})
         if h.hand:  # schema 1.1: only humanoids with a swapped hand carry these
@@ -124,8 +236,10 @@ class DatasetWriter:
         r = g.create_group("roles")
         for name, idx in sorted(h.roles.items()):
             r.create_dataset(name, data=np.asarray(idx, dtype=np.int32))
+        self.check()
 
     def add_object(self, oid: str, o: ObjectRecord) -> None:
+        self.check()
         g = self.file["objects"].create_group(oid)
         g.attrs.update(
             {
@@ -155,8 +269,10 @@ class DatasetWriter:
         g.create_dataset("com", data=np.asarray(o.com, np.float64))
         g.create_dataset("inertia", data=np.asarray(o.inertia, np.float64))
         g.create_dataset("surface_points", data=np.asarray(o.surface_points, np.float32))
+        self.check()
 
     def add_sequence(self, sid: str, s: SequenceRecord) -> None:
+        self.check()
         g = self.file["sequences"].create_group(sid)
         T = s.num_frames
         g.attrs.update(
@@ -183,6 +299,7 @@ class DatasetWriter:
             {k: _json(v) if isinstance(v, dict | list) else v for k, v in s.contact_meta.items()}
         )
         self._index.append((sid, T, s.humanoid_id, s.dataset, s.split))
+        self.check()
 
     def _write_index(self) -> None:
         idx = self.file["index"]
