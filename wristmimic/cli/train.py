@@ -36,6 +36,12 @@ def train_cmd(
     out: Path = typer.Option(Path("runs"), "--out", "-o", help="Parent folder of the run folders."),
     seed: int = typer.Option(0, "--seed", help="Seed of networks, action noise, minibatches and start frames."),
     resume: Path = typer.Option(None, "--resume", help="Continue this run folder exactly where it stopped."),
+    checkpoint_seconds: float = typer.Option(
+        None,
+        "--checkpoint-seconds",
+        help="Checkpoint after the first iteration, then at least this often (default: the preset's, 60; 0: every "
+        "iteration); a kill loses at most this long.",
+    ),
     nthread: int = typer.Option(None, "--nthread", help="Physics threads (default: all cores)."),
     backend: str = backend_option(),
     device: str = device_option(),
@@ -43,7 +49,9 @@ def train_cmd(
 ) -> None:
     """Train one PPO policy per scene; each run folder gets config.json, metrics.csv and checkpoint.pt.
 
-    Ctrl-C finishes the current iteration, saves a checkpoint and exits; --resume continues bit-for-bit.
+    Ctrl-C finishes the current iteration, saves a checkpoint and exits; --resume continues bit-for-bit. A
+    checkpoint is written after the first iteration and then at least every --checkpoint-seconds, so a kill loses
+    little. Non-finite values (NaN, inf) stop training with the last good checkpoint kept.
 
     Example: wristmimic train datasets/omomo.h5 --scene sub2_largetable_000 --variant wristmimic --preset cpu
 
@@ -54,8 +62,10 @@ def train_cmd(
     from wristmimic.safe_io import check_output_folder
 
     with user_errors():
+        if max_frames is not None and max_frames < 1:
+            raise InputError(None, "--max-frames", f"{max_frames}", "a positive number of frames")
         if resume is not None:
-            if scene or scenes or dataset or backend != "cpu" or device:
+            if scene or scenes or dataset or backend != "cpu" or device or checkpoint_seconds is not None:
                 raise InputError(None, "--resume", "takes dataset, scene, backend and config from the run folder")
             r = resume_run(resume, max_frames=max_frames, nthread=nthread, progress=not quiet)
             typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
@@ -65,7 +75,7 @@ def train_cmd(
         if not dataset.is_file():
             raise InputError(dataset, None, "file not found")
         check_output_folder(out)
-        ppo = make_preset(preset, max_frames=max_frames, num_envs=num_envs)
+        ppo = make_preset(preset, max_frames=max_frames, num_envs=num_envs, checkpoint_seconds=checkpoint_seconds)
         for sid in _scenes(dataset, scene, scenes):
             spec = TrainSpec(
                 dataset, sid, variant, seed, preset, ppo, ref_frames=ref_frames, backend=backend, device=device

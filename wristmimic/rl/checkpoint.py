@@ -4,6 +4,7 @@ and JSON text only), plus the random-number-generator states a bit-for-bit resum
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,8 @@ from wristmimic.safe_io import atomic_output, torch_load_untrusted
 CHECKPOINT_NAME = "checkpoint.pt"
 CHECKPOINT_FORMAT = "wristmimic-ppo-checkpoint"
 CHECKPOINT_VERSION = 1
+RUN_FILES = ("config.json", "metrics.csv", CHECKPOINT_NAME)
+"""The files of a run folder."""
 
 
 def checkpoint_path(run_dir_or_file: str | Path) -> Path:
@@ -28,9 +31,36 @@ def checkpoint_path(run_dir_or_file: str | Path) -> Path:
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
-    """Write ``state`` (tagged with the format and version) so that a crash never leaves half a file."""
-    with atomic_output(path, suffix=".pt") as tmp:
-        torch.save({"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, **state}, tmp)
+    """Write ``state`` (tagged with the format and version) so that a crash never leaves half a file: into a
+    temporary file beside ``path``, flushed to disk, then renamed over it. A failed write (full disk, file size
+    limit) raises :class:`InputError` with the system's reason; the previous ``path`` is untouched and the
+    temporary file removed."""
+    try:
+        with atomic_output(path, suffix=".pt") as tmp, open(tmp, "wb") as f:
+            torch.save({"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, **state}, f)
+            f.flush()
+            os.fsync(f.fileno())
+    except (OSError, RuntimeError) as exc:  # torch's zip writer reports a failed write as RuntimeError
+        raise InputError(path, None, f"not written ({_reason(exc)})", "a writable folder with free space") from None
+
+
+def _reason(exc: BaseException) -> str:
+    """The operating system's words for a failed write (``No space left on device``), else the first line."""
+    e: BaseException | None = exc
+    while e is not None:
+        if isinstance(e, OSError) and e.strerror:
+            return e.strerror
+        e = e.__cause__ or e.__context__
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+
+
+def remove_stale_temporaries(run_dir: Path) -> list[Path]:
+    """Delete the temporary files an atomic write leaves when its process is killed (``.checkpoint.pt.*.tmp``,
+    ``.metrics.csv.*.tmp``, ``.config.json.*.tmp``) from a run folder; returns them."""
+    stale = [p for name in RUN_FILES for p in Path(run_dir).glob(f".{name}.*.tmp")]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
 
 
 _EXPECTED = "a checkpoint written by `wristmimic train`"

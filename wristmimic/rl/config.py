@@ -97,6 +97,10 @@ class PPOConfig:
     """Training budget in environment frames (all worlds together)."""
     checkpoint_every: int = 50
     """Write ``checkpoint.pt`` every this many iterations (and always at the end or on Ctrl-C)."""
+    checkpoint_seconds: float = 60.0
+    """Also write ``checkpoint.pt`` after the first iteration of every start or resume and then whenever this many
+    seconds have passed since the last one, so a kill loses at most this long (or one iteration, if longer);
+    0: after every iteration."""
     eval_every: int = 0
     """Every this many iterations, run ``eval_trials`` frame-0 trials of the quick protocol with the current policy
     and log ``eval/success_rate`` (0: never)."""
@@ -124,6 +128,8 @@ class PPOConfig:
             )
         if min(self.num_envs, self.horizon, self.minibatch_size, self.epochs, self.checkpoint_every) < 1:
             raise InputError(None, "ppo", "num_envs, horizon, minibatch_size, epochs, checkpoint_every must be >= 1")
+        if not 0.0 <= self.checkpoint_seconds < math.inf:
+            raise InputError(None, "ppo.checkpoint_seconds", f"{self.checkpoint_seconds}", "a finite number >= 0")
         if batch % self.minibatch_size:
             raise InputError(
                 None,

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import math
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,6 +15,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from wristmimic.env.terminations import REASONS
+from wristmimic.errors import InputError
 from wristmimic.safe_io import atomic_output
 
 _REASON_CODES = tuple(code for code in sorted(REASONS) if code != 0)
@@ -106,30 +109,58 @@ def _fmt(v: object) -> str:
 
 
 class MetricsCsv:
-    """``metrics.csv``: one row per iteration, header from the first row; on resume, rows after the checkpoint's
-    iteration (written before a crash) are dropped so the file continues exactly."""
+    """``metrics.csv``: one row per iteration, header from the first row.
+
+    ``keep_until``: continue an existing file after a checkpoint of that iteration: rows after it (written before
+    a crash or a failure), a half-written last row and anything after it are dropped, so every iteration appears
+    exactly once. A row that cannot be written (full disk) is cut off again and raises :class:`InputError`."""
 
     def __init__(self, path: Path, keep_until: int | None = None):
         self.path = path
         self.columns: list[str] | None = None
         if keep_until is not None and path.exists():
-            with open(path, newline="") as f:
+            with open(path, newline="", encoding="utf-8") as f:
                 rows = list(csv.reader(f))
             if rows:
                 self.columns = rows[0]
-                kept = [r for r in rows[1:] if int(r[0]) <= keep_until]
-                with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
-                    csv.writer(f).writerows([rows[0], *kept])
+                kept = []
+                for r in rows[1:]:
+                    if len(r) != len(self.columns) or not r[0].isdigit() or int(r[0]) > keep_until:
+                        break
+                    kept.append(r)
+                if len(kept) < len(rows) - 1:
+                    with atomic_output(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as f:
+                        csv.writer(f).writerows([rows[0], *kept])
 
     def write(self, row: dict[str, object]) -> None:
         new = self.columns is None
+        columns = list(row) if new else self.columns
+        buf = io.StringIO()
+        w = csv.writer(buf)
         if new:
-            self.columns = list(row)
-        with open(self.path, "w" if new else "a", newline="") as f:
-            w = csv.writer(f)
-            if new:
-                w.writerow(self.columns)
-            w.writerow([_fmt(row.get(c, "")) for c in self.columns])  # type: ignore[union-attr]
+            w.writerow(columns)
+        w.writerow([_fmt(row.get(c, "")) for c in columns])  # type: ignore[union-attr]
+        data = buf.getvalue().encode("utf-8")
+        try:
+            fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if new else os.O_APPEND), 0o666)
+        except OSError as exc:
+            raise InputError(self.path, None, f"cannot be opened ({exc.strerror})") from None
+        try:
+            end = os.lseek(fd, 0, os.SEEK_END)
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, end)  # no half row: the file ends with its last complete row
+                if new:
+                    self.path.unlink()  # nor a file without one
+            raise InputError(
+                self.path, None, f"row of iteration {row.get('iteration')} not written ({exc.strerror})"
+            ) from None
+        finally:
+            os.close(fd)
+        self.columns = columns
 
 
 class _NoBar:

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.errors import InputError, WristmimicError
 from wristmimic.rl.checkpoint import CHECKPOINT_NAME, rng_state, save_checkpoint, set_rng_state
 from wristmimic.rl.config import PPOConfig
 from wristmimic.rl.curriculum import ObjectCurriculum
@@ -23,6 +24,25 @@ from wristmimic.rl.logger import EpisodeStats, MetricsCsv, train_progress
 from wristmimic.rl.networks import ActorCritic
 from wristmimic.rl.ppo import PPO
 from wristmimic.rl.storage import RolloutStorage
+
+_clock = time.monotonic
+"""The clock of time-based checkpoints (a test can replace it)."""
+
+
+class TrainingError(WristmimicError):
+    """Training stopped in an iteration (non-finite values, a write that failed): one line naming the run folder,
+    the iteration, what went wrong and which checkpoint the folder keeps."""
+
+    def __init__(self, run_dir: Path, iteration: int, problem: str, saved_iteration: int | None, kept: str = ""):
+        self.run_dir, self.iteration, self.problem, self.saved_iteration = run_dir, iteration, problem, saved_iteration
+        if not kept:
+            kept = (
+                "no checkpoint written yet"
+                if saved_iteration is None
+                else f"last good checkpoint kept at iteration {saved_iteration}"
+            )
+        self.kept = kept
+        super().__init__(f"{run_dir}: iteration {iteration}: {problem} ({kept})")
 
 
 class Runner:
@@ -75,45 +95,127 @@ class Runner:
         self._eval_env: WristMimicEnv | None = None
         self.stop_requested = False
         self.metrics: MetricsCsv | None = None
+        self.saved_iteration: int | None = None
+        """Iteration of the checkpoint in ``run_dir`` (None: none written or loaded)."""
+        self._last_save = _clock()
+        self._obs_ok = torch.ones(cfg.horizon + 1, cfg.num_envs, dtype=torch.bool, device=dev)
+        """(H + 1, N) whether each world's raw observation was finite at each step of the rollout (and after it)."""
 
     def learn(self, max_frames: int, progress: bool = True, should_stop: Callable[[], bool] | None = None) -> str:
         """Train until ``max_frames`` environment frames, Ctrl-C or ``should_stop()`` (asked after each iteration,
-        e.g. a Ray driver's stop request); returns ``"finished"`` / ``"interrupted"`` (a checkpoint is saved)."""
+        e.g. a Ray driver's stop request); returns ``"finished"`` / ``"interrupted"`` (a checkpoint is saved).
+
+        A checkpoint is written after the first iteration, then every ``checkpoint_every`` iterations and whenever
+        ``checkpoint_seconds`` have passed since the last one. Every iteration checks that its observations,
+        actions, rewards, values, losses, parameters, optimiser state and normaliser are finite; if not, or if a
+        write fails, :class:`TrainingError` is raised, ``metrics.csv`` is cut back to the last checkpoint (which
+        is kept as it was) and nothing else is written."""
         self.metrics = self.metrics or MetricsCsv(self.run_dir / "metrics.csv")
         desc = f"{self.metadata['scene']} [{self.metadata['variant']}]"
-        with stop_on_ctrl_c(self), train_progress(desc, self.frames, max_frames, progress) as bar:
-            while self.frames < max_frames and not self.stop_requested:
-                t0 = time.perf_counter()
-                gain = self.env.object_gain
-                if self.cfg.final_std > 0.0:  # the sigma schedule (a fixed sigma: a buffer, saved with the policy)
-                    self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
-                episode_row = self.collect()
-                losses = self.alg.update(self.storage, self.gen)
-                self.storage.clear()
-                dt = time.perf_counter() - t0
-                self.iteration += 1
-                self.frames += self.cfg.batch_size
-                terminations = sum(v for k, v in episode_row.items() if k.startswith("termination/"))
-                self.env.object_gain = self.curriculum.update(terminations, self.cfg.batch_size, self.frames)
-                evaluation = self.periodic_eval() if self._eval_due() else {}
-                self.seconds += time.perf_counter() - t0
-                row = {"iteration": self.iteration, "frames": self.frames, "seconds": self.seconds}
-                row |= {"frames_per_s": self.cfg.batch_size / dt, **episode_row, **losses}
-                row["curriculum/object_gain"] = gain
-                row |= {k: evaluation.get(k, math.nan) for k in EVAL_COLUMNS}
-                self.metrics.write(row)
-                bar.update(self.frames, row)
-                if self.iteration % self.cfg.checkpoint_every == 0:
-                    self.save()
-                if should_stop is not None and should_stop():
-                    self.stop_requested = True
-        self.save()
+        first = True
+        self._last_save = _clock()
+        try:
+            with stop_on_ctrl_c(self), train_progress(desc, self.frames, max_frames, progress) as bar:
+                while self.frames < max_frames and not self.stop_requested:
+                    t0 = time.perf_counter()
+                    gain = self.env.object_gain
+                    if self.cfg.final_std > 0.0:  # the sigma schedule (a fixed sigma: a buffer, saved with the policy)
+                        self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
+                    episode_row = self.collect()
+                    losses = self.alg.update(self.storage, self.gen)
+                    self.check_finite(self.iteration + 1, losses)
+                    self.storage.clear()
+                    dt = time.perf_counter() - t0
+                    self.iteration += 1
+                    self.frames += self.cfg.batch_size
+                    terminations = sum(v for k, v in episode_row.items() if k.startswith("termination/"))
+                    self.env.object_gain = self.curriculum.update(terminations, self.cfg.batch_size, self.frames)
+                    evaluation = self.periodic_eval() if self._eval_due() else {}
+                    self.seconds += time.perf_counter() - t0
+                    row = {"iteration": self.iteration, "frames": self.frames, "seconds": self.seconds}
+                    row |= {"frames_per_s": self.cfg.batch_size / dt, **episode_row, **losses}
+                    row["curriculum/object_gain"] = gain
+                    row |= {k: evaluation.get(k, math.nan) for k in EVAL_COLUMNS}
+                    try:
+                        self.metrics.write(row)
+                    except InputError as exc:
+                        raise self._error(f"metrics.csv {exc.problem}") from None
+                    bar.update(self.frames, row)
+                    if first or self._checkpoint_due():
+                        self.save()
+                    first = False
+                    if should_stop is not None and should_stop():
+                        self.stop_requested = True
+            if self.saved_iteration != self.iteration:
+                self.save()
+        except BaseException:
+            self._rollback_metrics()
+            raise
         return "interrupted" if self.stop_requested else "finished"
+
+    def _checkpoint_due(self) -> bool:
+        c = self.cfg
+        return self.iteration % c.checkpoint_every == 0 or _clock() - self._last_save >= c.checkpoint_seconds
+
+    def _error(self, problem: str, iteration: int | None = None) -> TrainingError:
+        return TrainingError(
+            self.run_dir, self.iteration if iteration is None else iteration, problem, self.saved_iteration
+        )
+
+    def _rollback_metrics(self) -> None:
+        """After a failure: ``metrics.csv`` keeps exactly the rows of the checkpoint (none without one)."""
+        path = self.run_dir / "metrics.csv"
+        with contextlib.suppress(OSError, WristmimicError, ValueError):
+            if self.saved_iteration is None:
+                path.unlink(missing_ok=True)
+            else:
+                self.metrics = MetricsCsv(path, keep_until=self.saved_iteration)
+
+    # -- non-finite values ---------------------------------------------------------------------------------
+    def _state_tensors(self) -> list[tuple[str, torch.Tensor]]:
+        """The learned state a checkpoint saves: parameters, normaliser buffers and optimiser moments."""
+        out = [(f"policy parameter {k}", v) for k, v in self.policy.state_dict().items() if v.is_floating_point()]
+        for i, st in enumerate(self.alg.optimizer.state.values()):
+            out += [(f"optimiser state {k} of parameter {i}", v) for k, v in st.items() if torch.is_tensor(v)]
+        return out
+
+    def check_finite(self, iteration: int, losses: dict[str, float]) -> None:
+        """Raise :class:`TrainingError` if anything of this iteration is non-finite: observations, values, actions,
+        rewards, returns, losses or the learned state after the update; the message names what went non-finite
+        first (by rollout step) and in how many worlds.
+
+        Cheap: one sum per tensor (NaN and inf propagate into it) and one host sync per iteration; only when a sum
+        is not finite are the tensors searched element by element (a sum that merely overflows is no error, except
+        for raw observations, checked per step and world by the sum of the row)."""
+        s = self.storage
+        rollout = [("value", s.values), ("action", s.actions), ("reward", s.rewards)]
+        rollout += [("return", s.returns), ("advantage", s.advantages)]
+        learned = self._state_tensors()
+        sums = torch.stack([t.sum().double() for _, t in rollout + learned])
+        ok = torch.cat([self._obs_ok.all()[None], sums.isfinite()])
+        bad_losses = [k for k, v in losses.items() if not math.isfinite(v)]
+        if bool(ok.all()) and not bad_losses:
+            return
+        found = []  # (first step, causal order, name, worlds): what went non-finite first, and where
+        for order, (name, t) in enumerate([("observation", None), *rollout]):
+            bad = ~self._obs_ok if t is None else ~t.isfinite().reshape(t.shape[0], t.shape[1], -1).all(-1)
+            if bool(bad.any()):
+                step = int(bad.any(1).nonzero()[0]) if order < 4 else len(bad)  # returns run backwards: last
+                found.append((step, order, name, int(bad.any(0).sum())))
+        if found:
+            _, _, name, worlds = min(found)
+            raise self._error(f"{name} is non-finite in {worlds} of {self.cfg.num_envs} worlds", iteration)
+        if bad_losses:
+            raise self._error(f"{bad_losses[0]} is non-finite", iteration)
+        for name, t in learned:
+            if not bool(t.isfinite().all()):
+                raise self._error(f"{name} is non-finite after the update", iteration)
 
     def collect(self) -> dict[str, float]:
         """One rollout of ``horizon`` steps into the storage, then GAE; returns the iteration's episode stats."""
         pi = self.policy
-        for _ in range(self.cfg.horizon):
+        for t in range(self.cfg.horizon):
+            self._obs_ok[t] = self.obs.sum(-1).isfinite()  # a NaN or inf propagates; no host sync here
             pi.normalizer.update(self.obs)
             obs_n = pi.normalizer(self.obs)
             self.noise = self._next_noise()
@@ -122,6 +224,7 @@ class Runner:
             self._restart_noise(terminated | info["time_outs"])
             self.storage.add(obs_n, actions, log_probs, mu, values, reward, terminated, info["time_outs"])
             self.stats.record(reward, terminated, info)
+        self._obs_ok[-1] = self.obs.sum(-1).isfinite()
         with torch.no_grad():
             last_values = pi.value(pi.normalizer(self.obs))
         self.alg.compute_returns(self.storage, last_values)
@@ -246,10 +349,23 @@ class Runner:
         self.env.object_gain = self.curriculum.gain
         self.storage.step = int(state["storage_step"])
         self.metrics = MetricsCsv(self.run_dir / "metrics.csv", keep_until=self.iteration)
+        self.saved_iteration = self.iteration
 
     def save(self) -> Path:
+        """Write ``checkpoint.pt`` atomically; refuses non-finite learned state or observations
+        (:class:`TrainingError`, the previous checkpoint kept), as well as a failed write."""
         path = self.run_dir / CHECKPOINT_NAME
-        save_checkpoint(path, self.state_dict())
+        tensors = [*self._state_tensors(), ("observation", self.obs)]
+        if not bool(torch.stack([t.sum().double() for _, t in tensors]).isfinite().all()):
+            for name, t in tensors:
+                if not bool(t.isfinite().all()):
+                    raise self._error(f"{name} is non-finite: checkpoint not written")
+        try:
+            save_checkpoint(path, self.state_dict())
+        except InputError as exc:
+            raise self._error(f"{CHECKPOINT_NAME} {exc.problem}") from None
+        self.saved_iteration = self.iteration
+        self._last_save = _clock()
         return path
 
 

@@ -5,6 +5,7 @@ A run folder holds ``config.json`` (everything that defines the run), ``metrics.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from collections.abc import Callable
@@ -17,9 +18,9 @@ from wristmimic.env.config import VARIANTS, EnvConfig, env_config_from_dict
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
-from wristmimic.rl.checkpoint import load_checkpoint
+from wristmimic.rl.checkpoint import CHECKPOINT_NAME, RUN_FILES, load_checkpoint, remove_stale_temporaries
 from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, preset_env, to_jsonable
-from wristmimic.rl.runner import Runner
+from wristmimic.rl.runner import Runner, TrainingError
 from wristmimic.safe_io import atomic_output, sha256_file
 from wristmimic.scene import SceneConfig
 from wristmimic.sim.backend import BACKENDS
@@ -147,14 +148,21 @@ def start_run(
     dataset_file: Path | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> TrainResult:
-    """Create ``run_dir`` (must not hold a run yet), write ``config.json`` and train to ``spec.ppo.max_frames``
-    (or until ``should_stop()`` turns true after an iteration: status ``interrupted``, checkpoint saved).
+    """Create ``run_dir`` (must not hold a checkpoint yet), write ``config.json`` and train to
+    ``spec.ppo.max_frames`` (or until ``should_stop()`` turns true after an iteration: status ``interrupted``,
+    checkpoint saved).
+
+    Nothing is written before the environment is built. A failure (or Ctrl-C twice) before the first checkpoint
+    removes what was written, and the folders created; after it, the folder keeps the last good checkpoint and
+    ``metrics.csv`` up to it (see :meth:`Runner.learn`). A folder with ``config.json`` but no checkpoint (a start
+    killed in its first iteration) is started afresh.
 
     ``dataset_file``: read the data from this copy of ``spec.dataset`` (e.g. a Ray worker's local copy);
     ``config.json`` still records ``spec.dataset`` and the sha256 of the bytes read."""
     run_dir = Path(run_dir)
     data = Path(dataset_file or spec.dataset)
-    if (run_dir / "config.json").exists():
+    _check_budget("ppo.max_frames", spec.ppo.max_frames)
+    if (run_dir / CHECKPOINT_NAME).exists():
         raise InputError(run_dir, None, "already holds a run", "a new folder (or use --resume)")
     _check_scene(data, spec.scene)
     if spec.variant not in VARIANTS:
@@ -163,16 +171,54 @@ def start_run(
         raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
     env_cfg = spec.env or preset_env(spec.preset, spec.variant)
     config = _config_dict(spec, env_cfg, sha256_file(data))
-    run_dir.mkdir(parents=True, exist_ok=True)
-    with atomic_output(run_dir / "config.json") as tmp:
-        tmp.write_text(dumps(config) + "\n")
-    runner = _build(config, run_dir, nthread, data)
+    runner = _build(config, run_dir, nthread, data)  # before the folder exists: a scene that fails leaves none
+    made = [d for d in (run_dir, *run_dir.parents) if not d.exists()]
     try:
+        _write_config(run_dir, config)
         runner.optimise_feedforward(progress)
         status = runner.learn(spec.ppo.max_frames, progress, should_stop)
+    except BaseException as exc:
+        if runner.saved_iteration is None:  # nothing trained was saved: leave nothing behind
+            kept = _remove_unsaved_run(run_dir, made)
+            if isinstance(exc, TrainingError):
+                raise TrainingError(run_dir, exc.iteration, exc.problem, None, f"no checkpoint yet: {kept}") from None
+        raise
     finally:
         runner.env.close()
     return TrainResult(run_dir, status, runner.iteration, runner.frames)
+
+
+def _check_budget(key: str, frames: int) -> None:
+    if frames < 1:
+        raise InputError(None, key, f"{frames} frames", "a positive training budget")
+
+
+def _write_config(run_dir: Path, config: dict[str, Any]) -> None:
+    """Create the run folder and write ``config.json``; files of a start that never saved a checkpoint (a run
+    killed in its first iteration) are replaced."""
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(run_dir, None, f"cannot be created ({exc.strerror})") from None
+    remove_stale_temporaries(run_dir)
+    (run_dir / "metrics.csv").unlink(missing_ok=True)
+    try:
+        with atomic_output(run_dir / "config.json") as tmp:
+            tmp.write_text(dumps(config) + "\n")
+    except OSError as exc:
+        raise InputError(run_dir / "config.json", None, f"not written ({exc.strerror})") from None
+
+
+def _remove_unsaved_run(run_dir: Path, made: list[Path]) -> str:
+    """Delete what a start wrote before its first checkpoint (and the folders it created); says what is left."""
+    with contextlib.suppress(OSError):
+        for name in RUN_FILES:
+            (run_dir / name).unlink(missing_ok=True)
+        remove_stale_temporaries(run_dir)
+    for d in made:  # deepest first
+        with contextlib.suppress(OSError):
+            d.rmdir()
+    return "run folder removed" if not run_dir.exists() else "its files removed"
 
 
 def resume_run(
@@ -188,6 +234,15 @@ def resume_run(
 
     ``dataset_file``: read the data from this copy of the recorded dataset (its sha256 must match)."""
     run_dir = Path(run_dir)
+    if max_frames is not None:
+        _check_budget("max_frames", max_frames)
+    if (run_dir / "config.json").is_file() and not (run_dir / CHECKPOINT_NAME).exists():
+        raise InputError(
+            run_dir,
+            None,
+            "no checkpoint: the run stopped in its first iteration",
+            "a run with checkpoint.pt (start it again)",
+        )
     state = load_checkpoint(run_dir)
     config = json.loads(state["config"])
     dataset = Path(dataset_file or config["dataset"]["path"])
@@ -197,6 +252,8 @@ def resume_run(
         raise InputError(dataset, None, "changed since the run started (sha256 differs)", "the same file")
     runner = _build(config, run_dir, nthread, dataset)
     try:
+        if run_dir.is_dir():
+            remove_stale_temporaries(run_dir)  # left by a kill during a write
         runner.load_state_dict(state)
         budget = max_frames if max_frames is not None else config["ppo"]["max_frames"]
         status = runner.learn(budget, progress, should_stop) if runner.frames < budget else "up to date"
