@@ -22,6 +22,7 @@ import numpy as np
 from wristmimic.errors import InputError
 from wristmimic.format.reader import Dataset, SequenceView
 from wristmimic.format.records import HumanoidRecord, ObjectRecord
+from wristmimic.format.validate import check_sequence
 from wristmimic.humanoid.skeleton import Skeleton, load_skeleton
 
 # collision bits: humanoid geoms never collide with each other, everything else collides with everything
@@ -274,6 +275,7 @@ def _add_object(
 def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None) -> Scene:
     """Build the MuJoCo scene of ``sequence_id`` from an open canonical file."""
     cfg = config or SceneConfig()
+    check_sequence(ds, sequence_id)  # the data gate: InputError naming file and key for the first problem
     seq: SequenceView = ds.sequence(sequence_id)
     hum = ds.humanoid(seq.humanoid_id)
     skel = load_skeleton(hum.mjcf, f"{ds.path}:humanoids/{seq.humanoid_id}")

@@ -332,9 +332,11 @@ def _check_dataset(meta: dict[str, Any], dataset: Path) -> tuple[str, str]:
     if sha and sha256_file(dataset) != sha:
         raise InputError(dataset, None, "differs from the run's dataset (sha256)", "the file the policy was trained on")
     from wristmimic.format.reader import open_dataset
+    from wristmimic.format.validate import check_sequence
 
     with open_dataset(dataset) as ds:
-        seq = ds.sequence(meta["scene"])  # one-line error naming the known ids
+        check_sequence(ds, meta["scene"])  # one-line error naming the known ids, or the data's first problem
+        seq = ds.sequence(meta["scene"])
         return str(ds.attrs.get("source_dataset", "")), ds.humanoid(seq.humanoid_id).hand
 
 

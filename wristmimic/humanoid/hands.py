@@ -627,6 +627,7 @@ def swap_hands(
     """Write ``out`` (atomically): sequence ``sequence_id`` of ``dataset`` with both hands of its humanoid
     replaced by ``hand`` (a built-in name or an MJCF path), its objects, and the humanoid's new roles."""
     from wristmimic.format.reader import open_dataset
+    from wristmimic.format.validate import check_sequence
     from wristmimic.format.writer import DatasetWriter
     from wristmimic.safe_io import sha256_file
 
@@ -634,6 +635,7 @@ def swap_hands(
     if out.resolve() == dataset.resolve():
         raise InputError(out, None, "is the input file", "another output path")
     with open_dataset(dataset) as ds:
+        check_sequence(ds, sequence_id)
         view = ds.sequence(sequence_id)
         hum = ds.humanoid(view.humanoid_id)
         where = f"{dataset}:humanoids/{view.humanoid_id}"

@@ -18,6 +18,7 @@ from wristmimic.env.config import VARIANTS, EnvConfig, env_config_from_dict
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
+from wristmimic.format.validate import check_sequence
 from wristmimic.rl.checkpoint import CHECKPOINT_NAME, RUN_FILES, load_checkpoint, remove_stale_temporaries
 from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, preset_env, to_jsonable
 from wristmimic.rl.runner import Runner, TrainingError
@@ -137,7 +138,7 @@ def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_f
 
 def _check_scene(dataset: Path, scene: str) -> None:
     with open_dataset(dataset) as ds:
-        ds.sequence(scene)  # InputError naming the known ids
+        check_sequence(ds, scene)  # InputError naming the known ids, or the first problem of the scene's data
 
 
 def start_run(
@@ -250,6 +251,7 @@ def resume_run(
         raise InputError(dataset, None, "dataset of the run not found", "the file recorded in config.json")
     if sha256_file(dataset) != config["dataset"]["sha256"]:
         raise InputError(dataset, None, "changed since the run started (sha256 differs)", "the same file")
+    _check_scene(dataset, config["scene"])
     runner = _build(config, run_dir, nthread, dataset)
     try:
         if run_dir.is_dir():

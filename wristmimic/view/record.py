@@ -37,6 +37,7 @@ import rerun as rr
 from wristmimic.env.config import WindowConfig
 from wristmimic.env.window import PHASE_NAMES
 from wristmimic.format.reader import open_dataset
+from wristmimic.format.validate import check_sequence
 from wristmimic.humanoid.skeleton import load_skeleton
 from wristmimic.rotations import quat_angle, wxyz_to_xyzw
 from wristmimic.safe_io import atomic_output
@@ -103,6 +104,7 @@ def record_reference(
     """Record the converted data of one sequence (no simulation): humanoid bodies posed by the stored
     ``body_pos``/``body_quat``, objects and supports, contact labels, hand contact, window and phases."""
     with open_dataset(dataset) as ds:
+        check_sequence(ds, sequence_id)
         ref = reference_from_dataset(ds, sequence_id, max_frames)
         hid = ds.sequence(sequence_id).humanoid_id
         skel = load_skeleton(ds.humanoid(hid).mjcf, f"{ds.path}:humanoids/{hid}")
