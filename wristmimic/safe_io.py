@@ -549,8 +549,8 @@ def safe_pickle_load(path: str | Path) -> object:
     if not path.is_file():
         raise InputError(path, None, "file not found")
     for fast in (True, False):
-        stream, size = _open_stream(path)
         try:
+            stream, size = _open_stream(path)
             with stream:  # type: ignore[attr-defined]
                 if fast:
                     return _FastRestricted(stream).load()  # type: ignore[arg-type]
@@ -564,10 +564,23 @@ def safe_pickle_load(path: str | Path) -> object:
         except InputError:
             raise
         except Exception as exc:  # noqa: BLE001 - truncated / not a pickle / decompression errors
+            if isinstance(exc, OSError) and exc.errno:  # the file itself cannot be read (permission, I/O error)
+                raise InputError(path, None, f"cannot be read ({_exception_line(exc)})", "a pickle file") from None
             raise InputError(
-                path, "<pickle>", f"cannot be unpickled ({type(exc).__name__}: {str(exc)[:120]})", "a pickle file"
+                path, "<pickle>", f"cannot be unpickled ({_exception_line(exc)})", "a pickle file"
             ) from None
     raise AssertionError("unreachable")
+
+
+def _exception_line(exc: BaseException, limit: int = 200) -> str:
+    """``<type>: <message>`` of an exception on one line: the first line of its message, whole; past ``limit``
+    characters its first sentence, cut at a word (marked `` ...``) only if that is still too long. An OSError
+    with an errno gives its ``strerror``."""
+    if isinstance(exc, OSError) and exc.errno:
+        return exc.strerror or os.strerror(exc.errno)
+    first = " ".join(next((ln for ln in str(exc).splitlines() if ln.strip()), "").split())
+    detail = first if len(first) <= limit else first_sentence(first, limit)
+    return f"{type(exc).__name__}: {detail}" if detail else type(exc).__name__
 
 
 def safe_npz_load(path: str | Path) -> dict[str, np.ndarray]:

@@ -25,11 +25,18 @@ def demo_cmd(
     Example: wristmimic demo --quick
     """
     from wristmimic.demo import QUICK, DemoConfig, run_demo
+    from wristmimic.safe_io import check_output_file, check_output_folder
 
     base = QUICK if quick else DemoConfig()
     cfg = replace(
         base, out=out, seed=seed, trials=trials or base.trials, train_frames=train_frames or base.train_frames
     )
+    with user_errors():  # before anything is said or done
+        check_output_folder(out)
+        for name in ("run", "eval", "report"):  # what the demo writes inside --out (demo.DemoConfig.out)
+            check_output_folder(out / name)
+        for name in ("demo.h5", "demo.rrd"):
+            check_output_file(out / name)
     typer.echo(
         f"wristmimic demo: {'under 3' if quick else 'under 15'} minutes on a 2-core machine; outputs in {cfg.out}/"
     )

@@ -25,9 +25,10 @@ def parahome(
     """
     from wristmimic.humanoid.parahome import generate_parahome_humanoid
     from wristmimic.humanoid.skeleton import load_skeleton
-    from wristmimic.safe_io import atomic_output
+    from wristmimic.safe_io import atomic_output, check_output_file
 
     with user_errors():
+        check_output_file(out)
         mjcf = generate_parahome_humanoid(bone_vectors, name)
         skel = load_skeleton(mjcf, out)
         with atomic_output(out, ".xml") as tmp:
@@ -68,8 +69,10 @@ def swap_hands_cmd(
     Example: wristmimic humanoid swap-hands datasets/parahome.h5 s110_move_kettle --hand smplx-free -o free.h5
     """
     from wristmimic.humanoid.hands import swap_hands
+    from wristmimic.safe_io import check_output_file
 
     with user_errors():
+        check_output_file(out)
         r = swap_hands(dataset, sequence, hand, out, palm=palm, left_palm=left_palm, ranges=ranges)
     typer.echo(
         f"wrote {r.out}: {r.sequence_id} with hand {r.hand} ({r.hand_source}); humanoid {r.humanoid_id}: "

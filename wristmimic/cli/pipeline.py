@@ -9,6 +9,42 @@ import typer
 from wristmimic.cli.errors import user_errors
 
 
+def check_outputs(spec_path: Path) -> None:
+    """Refuse, before any stage runs, output paths of the pipeline file that are the wrong kind of path: a folder
+    where a file is written (``[convert] output``) or a file where a folder is (the work folder, ``[hands]
+    output_dir``, ``[report] output``), or one below a file. The error names the pipeline file and the key."""
+    from wristmimic.errors import InputError
+    from wristmimic.pipeline import STATE_FILE, load_spec
+    from wristmimic.safe_io import check_output_file, check_output_folder
+
+    spec = load_spec(spec_path)
+
+    def path_of(table: str, key: str, default: Path | None) -> Path | None:
+        value = spec.get(table, {}).get(key, default)
+        if value is not None and not isinstance(value, (str, Path)):
+            raise InputError(spec_path, f"{table}.{key}", f"{value!r}", "a path (a string)")
+        return None if value is None else Path(value)
+
+    meta = spec.get("pipeline", {})
+    work_dir = path_of("pipeline", "work_dir", Path("runs") / "pipelines" / str(meta.get("name", spec_path.stem)))
+    checks = [(work_dir, "pipeline.work_dir", check_output_folder)]
+    checks.append((work_dir / STATE_FILE, "pipeline.work_dir", check_output_file))
+    if "convert" in spec:
+        checks.append((path_of("convert", "output", None), "convert.output", check_output_file))
+    if "hands" in spec:
+        checks.append((path_of("hands", "output_dir", work_dir / "hands"), "hands.output_dir", check_output_folder))
+    if "report" in spec:
+        checks.append((path_of("report", "output", work_dir / "report"), "report.output", check_output_folder))
+    for path, key, check in checks:
+        if path is None:
+            continue  # a missing required key is the stage's own error
+        try:
+            check(path, None)
+        except InputError as exc:
+            problem = f"{path} {exc.problem}" if exc.problem.startswith("is ") else exc.problem
+            raise InputError(spec_path, key, problem, exc.expected) from None
+
+
 def run_cmd(
     spec: Path = typer.Argument(..., help="Pipeline file (TOML), e.g. pipelines/omomo.toml."),
     nthread: int = typer.Option(None, "--nthread", help="Physics threads for training (default: all cores)."),
@@ -53,6 +89,7 @@ def run_cmd(
     from wristmimic.pipeline import run_pipeline
 
     with user_errors():
+        check_outputs(spec)
         options = None
         if ray is not None:
             from wristmimic.distributed import RayOptions

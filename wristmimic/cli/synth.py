@@ -27,9 +27,11 @@ def synth_cmd(
 
     Example: wristmimic synth -o datasets/demo.h5 --variant default --variant turn
     """
+    from wristmimic.safe_io import check_output_file
     from wristmimic.synth.generate import VARIANTS, generate
 
     with user_errors():
+        check_output_file(out)
         p = generate(out, seed=seed, variants=tuple(variant or VARIANTS), height=height)
     names = ", ".join(f"synth_{v}" for v in (variant or VARIANTS))
     typer.echo(f"wrote {p}: {names}")

@@ -17,7 +17,6 @@ import json
 import numbers
 import os
 import re
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +27,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from wristmimic.errors import InputError
-from wristmimic.safe_io import OutputError
+from wristmimic.safe_io import OutputError, atomic_output, remove_stale_temporaries
 
 #: Bumped whenever the post-processing of coacd's output changes (part of the cache key).
 _POSTPROCESS_VERSION = 1
@@ -320,7 +319,12 @@ def _read_cache(
 
 
 def _write_cache(path: Path, key: str, mesh_hash: str, params: HullParams, version: str, hs: HullSet) -> None:
-    """Write the cache file atomically (temporary file in the same folder, then ``os.replace``)."""
+    """Write the cache file atomically with :func:`~wristmimic.safe_io.atomic_output`.
+
+    Its temporary file names the writing process, so one left by a killed conversion is removed by the next
+    write of the same key; temporaries of the older naming (``.<key[:16]>.<random>.tmp``) are removed once
+    untouched for :data:`~wristmimic.safe_io.STALE_AFTER_S`.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     v = np.concatenate(hs.vertices).astype(np.float64)
     f = np.concatenate(hs.faces).astype(np.int32)
@@ -337,16 +341,9 @@ def _write_cache(path: Path, key: str, mesh_hash: str, params: HullParams, versi
         },
         sort_keys=True,
     )
-    fd, tmp = tempfile.mkstemp(prefix=f".{key[:16]}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, vertices=v, faces=f, vertex_offsets=vo, face_offsets=fo, meta=np.array(meta))
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    remove_stale_temporaries(path.parent / key[:16])  # the older naming: ".<key[:16]>.<random>.tmp"
+    with atomic_output(path, ".npz") as tmp, open(tmp, "wb") as fh:  # a file object: np.savez adds no suffix
+        np.savez(fh, vertices=v, faces=f, vertex_offsets=vo, face_offsets=fo, meta=np.array(meta))
 
 
 # --------------------------------------------------------------------------- decomposition

@@ -220,6 +220,8 @@ class _ChunkWriter:
         self.start, self.flushed, self.stop, self.chunk = start, start, stop, chunk
         self.pending: dict[int, Records] = {}
         self.on_advance: Callable[[int], None] = lambda n: None
+        self.writing: tuple[int, Path] | None = None
+        """(end, part file) of the write in progress: Ctrl-C may come after its rename, before ``flushed`` moves."""
 
     def __call__(self, rec: Records) -> None:
         for i, t in enumerate(rec["trial"].tolist()):
@@ -233,17 +235,28 @@ class _ChunkWriter:
 
     def flush(self, end: int | None = None) -> None:
         """Write trials ``flushed .. end - 1`` (default: the longest contiguous completed run)."""
+        self.settle()
         if end is None:
             end = self.flushed
             while end in self.pending:
                 end += 1
         if end <= self.flushed:
             return
-        df = _frame([self.pending.pop(t) for t in range(self.flushed, end)], self.scene, self.noise)
+        df = _frame([self.pending[t] for t in range(self.flushed, end)], self.scene, self.noise)
         path = self.folder / f"trials-{self.flushed:08d}-{end:08d}.parquet"
+        self.writing = (end, path)
         with atomic_output(path, suffix=".parquet") as tmp:
             df.to_parquet(tmp, index=False)
-        self.flushed = end
+        self.settle()
+
+    def settle(self) -> None:
+        """Count the part being written as written if its file is in place (an interrupt after the rename); its
+        trials stay pending otherwise, so that they are written again, not dropped."""
+        if self.writing is not None and self.writing[1].is_file():
+            for t in range(self.flushed, self.writing[0]):
+                self.pending.pop(t, None)
+            self.flushed = self.writing[0]
+        self.writing = None
 
 
 def summarize(df: pd.DataFrame, info: dict[str, Any]) -> dict[str, Any]:
@@ -442,7 +455,7 @@ def evaluate_policy(
                     writer = None
         except KeyboardInterrupt:
             if writer is not None:
-                writer.flush()
+                writer.flush()  # settles a part the interrupt came in, then writes every completed trial
                 kept += writer.flushed - writer.start
             raise EvalInterrupted(out, kept, n_trials) from None
         finally:
