@@ -208,4 +208,14 @@ def test_sigma_schedule_sets_each_rollouts_sigma_and_the_policy_keeps_the_last(d
     # the rollout of iteration k is collected after (k - 1) x 32 frames: 0.1, 0.1, 0.0316, 0.01
     assert logged == pytest.approx([math.exp(cfg.log_std_at(32 * k)) for k in range(4)], rel=1e-5)
     assert logged[-1] == pytest.approx(0.01, rel=1e-5) and logged[1] == pytest.approx(0.1, rel=1e-5)
-    assert load_policy(tmp_path / "run").net.log_std.exp() == pytest.approx(torch.full((153,), 0.01), rel=1e-5)
+    assert torch.allclose(load_policy(tmp_path / "run").net.log_std.exp(), torch.full((153,), 0.01), rtol=1e-5)
+
+
+def test_deployed_sigma_is_used_by_evaluation_but_not_by_training(dataset: Path, tmp_path: Path) -> None:
+    from wristmimic.evaluate.policy import load_eval_policy
+
+    start_run(_spec(dataset, 1, deploy_std=0.004), tmp_path / "run", nthread=1, progress=False)
+    assert float(_rows(tmp_path / "run")[0]["loss/sigma"]) == pytest.approx(0.1, rel=1e-4)  # training explores
+    p = load_eval_policy(tmp_path / "run")
+    assert p.policy.sigma.shape == (153,) and torch.allclose(p.sigma, torch.full((153,), 0.004))
+    assert torch.allclose(torch.exp(p.policy.net.log_std), torch.full((153,), 0.1), rtol=1e-2)  # training sigma kept

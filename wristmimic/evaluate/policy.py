@@ -65,7 +65,7 @@ class RunPolicy:
 
     @property
     def sigma(self) -> torch.Tensor:
-        return torch.exp(self.policy.net.log_std.detach().to(torch.float32))
+        return self.policy.sigma.to(torch.float32)
 
 
 def load_eval_policy(run_dir_or_checkpoint: str | Path) -> RunPolicy:

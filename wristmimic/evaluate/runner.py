@@ -128,6 +128,8 @@ def _settings_dict(
         "ref_frames": m.get("ref_frames"),
         "base_seed": trials.base_seed,
         "noise": trials.noise,
+        # the sigma of the sampled actions (mean over action dimensions; a run's ppo.deploy_std when set)
+        **({"action_sigma": float(policy.sigma.mean())} if trials.noise == "actions" else {}),
         "max_object_position_error_m": trials.max_obj_pos_err_m,
         "min_contact_ratio": trials.min_contact_ratio,
         "early_termination": protocol.early_termination,

@@ -32,6 +32,15 @@ class Policy:
     config: dict
     feedforward: torch.Tensor | None = None
     """(T, D) the run's open-loop PD-target offsets (``WristMimicEnv.feedforward``), if it optimised them."""
+    deploy_std: float = 0.0
+    """``PPOConfig.deploy_std``: the sigma of sampled actions once deployed (0: the training sigma)."""
+
+    @property
+    def sigma(self) -> torch.Tensor:
+        """(A,) sigma of the deployed policy's sampled actions."""
+        if self.deploy_std > 0.0:
+            return torch.full_like(self.net.log_std.detach(), self.deploy_std)
+        return torch.exp(self.net.log_std.detach())
 
     @property
     def observation_size(self) -> int:
@@ -51,7 +60,7 @@ class Policy:
         mu = self.net.actor(self.net.normalizer(obs))
         if deterministic:
             return mu
-        return mu + torch.exp(self.net.log_std) * torch.randn(mu.shape, generator=generator, device=mu.device)
+        return mu + self.sigma * torch.randn(mu.shape, generator=generator, device=mu.device)
 
     def to(self, device: torch.device | str) -> Policy:
         """Move the network to ``device`` (observations must be there too)."""
@@ -90,4 +99,5 @@ def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
         frames=int(state["frames"]),
         config=config,
         feedforward=state.get("feedforward"),
+        deploy_std=ppo.deploy_std,
     )

@@ -289,7 +289,15 @@ class Runner:
         m = self.metadata
         seed = int(m.get("seed", 0))
         current = Policy(
-            self.policy, m["scene"], m["variant"], m.get("dataset_sha256", ""), seed, self.iteration, self.frames, {}
+            self.policy,
+            m["scene"],
+            m["variant"],
+            m.get("dataset_sha256", ""),
+            seed,
+            self.iteration,
+            self.frames,
+            {},
+            deploy_std=self.cfg.deploy_std,
         )
         run_trials(self._eval_env, RunPolicy(current, {}), settings, 0, self.cfg.eval_trials, records.append)
         col = {
