@@ -346,6 +346,11 @@ def test_evaluate_and_report_commands_on_a_trained_run(dataset: Path, tmp_path: 
     summary = json.loads((out / "summary.json").read_text())
     assert summary["policy"]["run_dir"] == str(run.resolve()) and summary["settings"]["ref_frames"] == 20
     assert summary["scenes"][0]["frames_total"] == 19 and summary["scenes"][0]["method"] == "WristMimic (Ours)"
+    assert summary["settings"]["action_sigma"] == pytest.approx(0.003)  # the CPU recipe's deployed sigma
+    args = ["evaluate", str(run), "-p", "quick", "-n", "2", "--nthread", "1", "-q", "-o", str(tmp_path / "wide")]
+    assert cli.invoke(app, [*args, "--deploy-std", "0"]).exit_code == 0  # 0: the training sigma
+    wide = json.loads((tmp_path / "wide" / "eval.json").read_text())
+    assert wide["action_sigma"] == pytest.approx(0.1, rel=0.02)
     r = cli.invoke(app, ["report", str(run), "-o", str(tmp_path / "rep")])
     assert r.exit_code == 0, r.output
     assert (tmp_path / "rep" / "training_curves.png").is_file() and "training_curves.png" in (

@@ -30,6 +30,13 @@ def evaluate_cmd(
         None, "--noise", help="How trials differ: actions (sampled) or initial-state (default: the protocol's)."
     ),
     seed: int = typer.Option(None, "--seed", min=0, help="Base seed of the trial seeds (default: the protocol's)."),
+    deploy_std: float = typer.Option(
+        None,
+        "--deploy-std",
+        min=0.0,
+        help="Sigma of the sampled actions (default: the run's ppo.deploy_std, else its training sigma); "
+        "0: the training sigma. Recorded as action_sigma in eval.json.",
+    ),
     dataset: Path = typer.Option(None, "--dataset", help="Canonical file to use instead of the run's (same sha256)."),
     backend: str = backend_option(),
     device: str = device_option(),
@@ -51,6 +58,8 @@ def evaluate_cmd(
     with user_errors():
         proto = load_protocol(protocol)
         policy = load_eval_policy(run)
+        if deploy_std is not None:
+            policy.policy.deploy_std = float(deploy_std)
         run_dir = Path(policy.metadata["run_dir"])
         target = out or run_dir / "eval" / proto.name
         check_output_folder(target, "--out" if out else None)
