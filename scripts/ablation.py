@@ -1,7 +1,8 @@
 """Ablation of the CPU training recipe: one row per lever, every row at the same frame budget and seed.
 
 Usage:  python scripts/ablation.py DATASET.h5 --scene synth_default --frames 300000 -o reports/ablation_synth_default
-        [--rows recipe,absolute,fixed_ppo,no_curriculum,uniform_starts] [--trials 256] [--seed 0]
+        [--rows recipe,absolute,fixed_ppo,no_curriculum,uniform_starts,training_sigma,sigma_anneal] [--trials 256]
+        [--seed 0]
 
 Each row trains with ``wristmimic.rl.start_run`` (the ``cpu`` preset with one lever changed) and is evaluated
 under the quick protocol with ``--trials`` frame-0 trials, as ``wristmimic evaluate`` does. Writes
@@ -45,6 +46,12 @@ ROWS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
         "uniform start frames (no failure weighting)",
         {"starts": StartSamplingConfig(adaptive=False)},
         {},
+    ),
+    "training_sigma": ("deployed with the training sigma (~0.1) instead of 0.003", {}, {"deploy_std": 0.0}),
+    "sigma_anneal": (
+        "training sigma annealed 0.1 -> 0.003 over the first 250k frames (not learned)",
+        {},
+        {"learn_std": False, "min_std": 0.0, "final_std": 0.003, "std_anneal_end": 250_000},
     ),
 }
 
