@@ -8,6 +8,7 @@ iteration) registered for the test: in this process, or in the ``wristmimic trai
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import resource
@@ -15,6 +16,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -27,9 +29,11 @@ from wristmimic.cli.main import app
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.rl import TrainSpec, preset, resume_run, start_run
+from wristmimic.rl import checkpoint as rl_checkpoint
 from wristmimic.rl import config as rl_config
 from wristmimic.rl import runner as rl_runner
 from wristmimic.rl.checkpoint import load_checkpoint
+from wristmimic.rl.config import PPOConfig, from_jsonable
 from wristmimic.rl.logger import TIME_COLUMNS, MetricsCsv
 from wristmimic.rl.networks import ActorCritic
 from wristmimic.rl.ppo import PPO
@@ -74,9 +78,10 @@ def _subprocess(*args: str, **kw) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def reference(dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """An uninterrupted ``wristmimic train`` subprocess of ``ITERATIONS`` iterations, checkpointing each one."""
+    """An uninterrupted ``wristmimic train`` subprocess of ``ITERATIONS`` iterations (checkpointing each one, the
+    default)."""
     out = tmp_path_factory.mktemp("reference")
-    r = _subprocess(*_train_args(dataset, out, ITERATIONS * FRAMES), "--checkpoint-seconds", "0")
+    r = _subprocess(*_train_args(dataset, out, ITERATIONS * FRAMES))
     assert r.returncode == 0 and f"finished at iteration {ITERATIONS}" in r.stdout, r.stdout + r.stderr
     (run,) = out.iterdir()
     return run
@@ -135,9 +140,10 @@ def _same_params(a: Path, b: Path) -> bool:
 def test_kill_9_loses_at_most_one_iteration_and_resume_matches_an_uninterrupted_run(
     dataset: Path, reference: Path, tmp_path: Path
 ) -> None:
+    """Default settings (a checkpoint after every iteration, written in the background)."""
     out = tmp_path / "runs"
     args = _train_args(dataset, out, 1000 * FRAMES)
-    cmd = [sys.executable, "-c", BOOT, "train", *args, "--checkpoint-seconds", "0", *_common()]
+    cmd = [sys.executable, "-c", BOOT, "train", *args, *_common()]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=ENV)
     deadline = time.monotonic() + 90
     while not any(_complete_rows(p) >= 3 for p in out.glob("*/metrics.csv")):
@@ -160,14 +166,59 @@ def test_kill_9_loses_at_most_one_iteration_and_resume_matches_an_uninterrupted_
     assert not _temporaries(run)
 
 
+SLOW_WRITE = (
+    "import os, pathlib, time, torch\n"
+    "_save = torch.save\n"
+    "def _slow_save(obj, f, *args, **kw):\n"
+    "    _save(obj, f, *args, **kw)\n"
+    "    if obj.get('iteration') == 3:  # the checkpoint's temporary file is written, not yet synced and renamed\n"
+    "        pathlib.Path(os.environ['WRITING']).touch()\n"
+    "        time.sleep(60)\n"
+    "torch.save = _slow_save\n"
+)
+"""Prepended to ``BOOT``: the background write of iteration 3 stops inside its temporary file."""
+
+
+def test_kill_9_during_a_background_write_loses_only_that_iteration(
+    dataset: Path, reference: Path, tmp_path: Path
+) -> None:
+    """SIGKILL while the checkpoint of iteration 3 is being written and iteration 4 waits for it: checkpoint.pt is
+    still the one of iteration 2 (the temporary file is dropped on resume), metrics.csv holds rows 1-3 (row 4 waits
+    for the write) and the resume repeats iteration 3 bit-for-bit."""
+    out, writing = tmp_path / "runs", tmp_path / "writing"
+    cmd = [sys.executable, "-c", SLOW_WRITE + BOOT, "train", *_train_args(dataset, out, 1000 * FRAMES), *_common()]
+    env = {**ENV, "WRITING": str(writing)}
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    deadline = time.monotonic() + 90
+    while not writing.exists():
+        assert proc.poll() is None, proc.stderr.read().decode() if proc.stderr else ""
+        assert time.monotonic() < deadline, "no write of iteration 3 within 90 s"
+        time.sleep(0.01)
+    time.sleep(0.5)  # iteration 4 runs meanwhile and waits for the write
+    proc.kill()
+    proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    (run,) = out.iterdir()
+    assert _temporaries(run)  # killed inside the write
+    assert load_checkpoint(run)["iteration"] == 2 and _complete_rows(run / "metrics.csv") == 3
+
+    r = _subprocess("--resume", str(run), "--max-frames", str(ITERATIONS * FRAMES))
+    assert r.returncode == 0 and f"finished at iteration {ITERATIONS}" in r.stdout, r.stdout + r.stderr
+    assert _rows(run) == _rows(reference) and _same_params(run, reference)
+    assert not _temporaries(run)
+
+
 # ------------------------------------------------------------------------------------------ full disk
 
 
+@pytest.mark.parametrize("iterations", [ITERATIONS, 3], ids=["next-iteration", "at-the-end"])
 def test_a_checkpoint_write_on_a_full_disk_fails_in_one_line_and_keeps_the_previous_one(
-    dataset: Path, reference: Path, tmp_path: Path
+    dataset: Path, reference: Path, tmp_path: Path, iterations: int
 ) -> None:
+    """The background write of iteration 3 fails; the error surfaces in iteration 4, or in the final wait for the
+    writer when iteration 3 is the last."""
     out = tmp_path / "runs"
-    r = _subprocess(*_train_args(dataset, out, 2 * FRAMES), "--checkpoint-seconds", "0")
+    r = _subprocess(*_train_args(dataset, out, 2 * FRAMES))
     assert r.returncode == 0 and "finished at iteration 2" in r.stdout, r.stderr
     (run,) = out.iterdir()
     before = (run / "checkpoint.pt").read_bytes()
@@ -178,7 +229,7 @@ def test_a_checkpoint_write_on_a_full_disk_fails_in_one_line_and_keeps_the_previ
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG from write(), as on a full disk, not a core dump
 
-    r = _subprocess("--resume", str(run), "--max-frames", str(ITERATIONS * FRAMES), preexec_fn=small_files)
+    r = _subprocess("--resume", str(run), "--max-frames", str(iterations * FRAMES), preexec_fn=small_files)
     assert r.returncode == 1, r.stdout + r.stderr
     _assert_one_line_error(
         r.stderr, str(run), "iteration 3: checkpoint.pt not written", "last good checkpoint kept at iteration 2"
@@ -291,7 +342,7 @@ def test_non_finite_values_stop_training_with_the_last_good_checkpoint(
 ) -> None:
     _inject(monkeypatch, what, iteration)
     out = tmp_path / "runs"
-    args = ["train", *_train_args(dataset, out, 6 * FRAMES), "--checkpoint-seconds", "0", *_common()]
+    args = ["train", *_train_args(dataset, out, 6 * FRAMES), *_common()]
     r = CliRunner().invoke(app, args)
     assert r.exit_code == 1, r.output
     (run,) = out.iterdir()
@@ -307,9 +358,9 @@ def test_non_finite_values_stop_training_with_the_last_good_checkpoint(
 def test_after_a_non_finite_reward_metrics_match_the_checkpoint_and_resume_loses_nothing(
     dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Checkpoints only after iteration 1 (60 s, every 20): a NaN in iteration 4 cuts metrics.csv back to row 1,
-    and a resume without the fault gives the rows of a clean run."""
-    spec = TrainSpec(dataset, SID, ppo=preset("cpu", **TINY, max_frames=5 * FRAMES))
+    """Checkpoints only after iteration 1 (60 s, every 20, as configs from before asynchronous checkpoints): a NaN
+    in iteration 4 cuts metrics.csv back to row 1, and a resume without the fault gives the rows of a clean run."""
+    spec = TrainSpec(dataset, SID, ppo=preset("cpu", **TINY, max_frames=5 * FRAMES, checkpoint_seconds=60.0))
     start_run(spec, tmp_path / "clean", nthread=1, progress=False)
     with monkeypatch.context() as m:
         _inject(m, "reward", 4)
@@ -340,7 +391,7 @@ def test_a_failure_in_the_first_iteration_leaves_no_run_folder(
 
 def test_save_refuses_a_non_finite_state(dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Even past the per-iteration check, nothing non-finite reaches checkpoint.pt."""
-    spec = TrainSpec(dataset, SID, ppo=preset("cpu", **TINY, max_frames=3 * FRAMES, checkpoint_seconds=0))
+    spec = TrainSpec(dataset, SID, ppo=preset("cpu", **TINY, max_frames=3 * FRAMES))
     monkeypatch.setattr(Runner, "check_finite", lambda self, iteration, losses: None)
     _inject(monkeypatch, "parameter", 2)
     with pytest.raises(TrainingError, match=r"iteration 2: policy parameter actor.0.weight is non-finite: checkpoint"):
@@ -351,8 +402,16 @@ def test_save_refuses_a_non_finite_state(dataset: Path, tmp_path: Path, monkeypa
 # ------------------------------------------------------------------------------------------ checkpoint cadence
 
 
+@pytest.mark.parametrize(
+    ("settings", "expected"),
+    [
+        ({}, [1, 2, 3, 4, 5, 6, 7, 8, 9]),  # the default: after every iteration (once at the end)
+        ({"checkpoint_every": 4, "checkpoint_seconds": 60.0}, [1, 4, 7, 8, 9]),  # 1: first; 4, 8: every 4; 7: 75 s
+    ],  # after the one at 4; 9: the end
+    ids=["default", "every-4-or-60s"],
+)
 def test_checkpoints_after_the_first_iteration_then_by_time_and_by_count(
-    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, settings: dict, expected: list[int]
 ) -> None:
     now = {"t": 0.0}
     monkeypatch.setattr(rl_runner, "_clock", lambda: now["t"])
@@ -363,17 +422,62 @@ def test_checkpoints_after_the_first_iteration_then_by_time_and_by_count(
         now["t"] += 25.0  # every iteration takes 25 s
         return collect(self)
 
-    def record_save(self: Runner) -> Path:
+    def record_save(self: Runner, wait: bool = True) -> Path:
         saved.append(self.iteration)
-        return save(self)
+        return save(self, wait)
 
     monkeypatch.setattr(Runner, "collect", slow_collect)
     monkeypatch.setattr(Runner, "save", record_save)
-    ppo = preset("cpu", **TINY, max_frames=9 * FRAMES, checkpoint_every=4, checkpoint_seconds=60.0)
+    ppo = preset("cpu", **TINY, max_frames=9 * FRAMES, **settings)
     start_run(TrainSpec(dataset, SID, ppo=ppo), tmp_path / "run", nthread=1, progress=False)
-    # 1: first; 4, 8: every 4; 7: 75 s after the one at 4; 9: the end
-    assert saved == [1, 4, 7, 8, 9]
+    assert saved == expected
     assert load_checkpoint(tmp_path / "run")["iteration"] == 9
+
+
+def test_checkpoints_are_written_in_the_background_one_at_a_time(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A slow write (0.5 s) of iteration k runs in another thread while iteration k + 1 collects; the next write
+    starts only after it; when it lands, metrics.csv holds exactly the rows up to k (row k + 1 waits for it)."""
+    run = tmp_path / "run"
+    events: list[tuple[str, int]] = []
+    writes = {"in_flight": 0, "most": 0, "main_thread": 0}
+    write, collect = rl_checkpoint.save_checkpoint, Runner.collect
+
+    def slow_write(path: Path, state: dict) -> None:
+        k = state["iteration"]
+        writes["in_flight"] += 1
+        writes["most"] = max(writes["most"], writes["in_flight"])
+        writes["main_thread"] += threading.current_thread() is threading.main_thread()
+        time.sleep(0.5)
+        write(path, state)
+        events.append(("written", k))
+        assert _complete_rows(run / "metrics.csv") == k
+        writes["in_flight"] -= 1
+
+    def recording_collect(self: Runner) -> dict:
+        events.append(("collect", self.iteration + 1))
+        return collect(self)
+
+    monkeypatch.setattr(rl_checkpoint, "save_checkpoint", slow_write)
+    monkeypatch.setattr(Runner, "collect", recording_collect)
+    ppo = preset("cpu", **TINY, max_frames=4 * FRAMES)
+    assert start_run(TrainSpec(dataset, SID, ppo=ppo), run, nthread=1, progress=False).iteration == 4
+    assert events == [("collect", 1)] + [e for k in (1, 2, 3) for e in (("collect", k + 1), ("written", k))] + [
+        ("written", 4)
+    ]
+    assert writes == {"in_flight": 0, "most": 1, "main_thread": 0}
+    assert load_checkpoint(run)["iteration"] == 4 and _iterations(run) == [1, 2, 3, 4] and not _temporaries(run)
+
+
+def test_configs_from_before_asynchronous_checkpoints_still_load() -> None:
+    """Runs recorded checkpoint_every and checkpoint_seconds = 60 (kept: a resume keeps their cadence); older
+    ones recorded neither (the default: every iteration)."""
+    fields = {k: v for k, v in rl_config.to_jsonable(preset("cpu")).items() if not k.startswith("checkpoint_")}
+    old = from_jsonable(PPOConfig, {**fields, "checkpoint_every": 20, "checkpoint_seconds": 60.0})
+    assert (old.checkpoint_every, old.checkpoint_seconds) == (20, 60.0)
+    assert from_jsonable(PPOConfig, fields).checkpoint_seconds == 0.0 == preset("cpu").checkpoint_seconds
+    assert preset("paper").checkpoint_seconds == 0.0
 
 
 # ------------------------------------------------------------------------------------------ bad budgets and scenes
@@ -430,6 +534,35 @@ def test_a_failure_before_the_first_iteration_removes_the_folder_it_created(
     assert r.exit_code == 1
     _assert_one_line_error(r.stderr, "feedforward: search failed")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("change", "fragments"),
+    [
+        ("network", ("policy.actor.0.weight: shape [16, ", "(expected shape [32, ", "actor [32]")),
+        ("obs", ("obs: shape [3, 7] (expected a tensor of shape [2, ",)),
+    ],
+)
+def test_resume_with_a_checkpoint_that_does_not_fit_fails_in_one_line(
+    reference: Path, tmp_path: Path, change: str, fragments: tuple[str, ...]
+) -> None:
+    """Weights of another network size (the checkpoint's config says 32 units, its weights have 16), or saved
+    observations of another shape: one line naming the file and the entry, and the run folder is left as it was."""
+    run = tmp_path / "run"
+    shutil.copytree(reference, run)
+    state = torch.load(run / "checkpoint.pt", weights_only=True, map_location="cpu")
+    if change == "network":
+        config = json.loads(state["config"])
+        config["ppo"]["actor_hidden"] = [32]
+        state["config"] = json.dumps(config)
+    else:
+        state["obs"] = torch.zeros(3, 7)
+    torch.save(state, run / "checkpoint.pt")
+    before = {p.name: p.read_bytes() for p in run.iterdir()}
+    r = CliRunner().invoke(app, ["train", "--resume", str(run), "--max-frames", str(12 * FRAMES), *_common()])
+    assert r.exit_code == 1, r.output
+    _assert_one_line_error(r.stderr, f"{run / 'checkpoint.pt'}: ", *fragments)
+    assert {p.name: p.read_bytes() for p in run.iterdir()} == before
 
 
 # ------------------------------------------------------------------------------------------ left-overs of a kill

@@ -39,8 +39,9 @@ def train_cmd(
     checkpoint_seconds: float = typer.Option(
         None,
         "--checkpoint-seconds",
-        help="Checkpoint after the first iteration, then at least this often (default: the preset's, 60; 0: every "
-        "iteration); a kill loses at most this long.",
+        help="Seconds between checkpoints (default 0: after every iteration, written in the background, so a kill "
+        "loses at most the iteration being written and the one in progress; N > 0: after the first iteration, then "
+        "every N seconds or the preset's checkpoint_every iterations).",
     ),
     nthread: int = typer.Option(None, "--nthread", help="Physics threads (default: all cores)."),
     backend: str = backend_option(),
@@ -50,8 +51,8 @@ def train_cmd(
     """Train one PPO policy per scene; each run folder gets config.json, metrics.csv and checkpoint.pt.
 
     Ctrl-C finishes the current iteration, saves a checkpoint and exits; --resume continues bit-for-bit. A
-    checkpoint is written after the first iteration and then at least every --checkpoint-seconds, so a kill loses
-    little. Non-finite values (NaN, inf) stop training with the last good checkpoint kept.
+    checkpoint is written after every iteration (in the background, see --checkpoint-seconds), so a kill loses at
+    most one finished iteration. Non-finite values (NaN, inf) stop training with the last good checkpoint kept.
 
     Example: wristmimic train datasets/omomo.h5 --scene sub2_largetable_000 --variant wristmimic --preset cpu
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +13,7 @@ import numpy as np
 import torch
 
 from wristmimic.errors import InputError
-from wristmimic.safe_io import atomic_output, torch_load_untrusted
+from wristmimic.safe_io import OutputError, atomic_output, torch_load_untrusted
 
 CHECKPOINT_NAME = "checkpoint.pt"
 CHECKPOINT_FORMAT = "wristmimic-ppo-checkpoint"
@@ -40,8 +41,57 @@ def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
             torch.save({"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, **state}, f)
             f.flush()
             os.fsync(f.fileno())
-    except (OSError, RuntimeError) as exc:  # torch's zip writer reports a failed write as RuntimeError
-        raise InputError(path, None, f"not written ({_reason(exc)})", "a writable folder with free space") from None
+    except (OSError, RuntimeError, OutputError) as exc:  # torch's zip writer reports a failed write as RuntimeError
+        reason = exc.reason if isinstance(exc, OutputError) else _reason(exc)
+        raise InputError(path, None, f"not written ({reason})", "a writable folder with free space") from None
+
+
+def snapshot(state: Any) -> Any:
+    """A copy of ``state`` that shares no memory with the training: every tensor (and numpy array) copied into CPU
+    memory, dicts, lists and tuples rebuilt, other values (numbers, text) kept; so that it can be written while
+    training goes on."""
+    if isinstance(state, torch.Tensor):
+        return state.detach().to("cpu", copy=True)
+    if isinstance(state, dict):
+        return {k: snapshot(v) for k, v in state.items()}
+    if type(state) in (list, tuple):
+        return type(state)(snapshot(v) for v in state)
+    if isinstance(state, np.ndarray):
+        return state.copy()
+    return state
+
+
+class CheckpointWriter:
+    """Writes checkpoints with :func:`save_checkpoint` in one background thread, at most one at a time.
+
+    :meth:`submit` starts writing a :func:`snapshot` of the state and returns at once; :meth:`collect` waits for
+    that write and takes its outcome, and must be called before the next :meth:`submit`: writes never queue up. A write that fails removes its temporary file and leaves the previous checkpoint as it was."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="checkpoint-writer")
+        self._pending: tuple[int, Future[None]] | None = None
+
+    def submit(self, state: dict[str, Any], tag: int) -> None:
+        """Start writing ``state`` (a snapshot: nothing the caller changes afterwards) tagged ``tag``."""
+        if self._pending is not None:
+            raise RuntimeError(f"checkpoint write {self._pending[0]} not collected before the next one")
+        self._pending = (tag, self._pool.submit(save_checkpoint, self.path, state))
+
+    def collect(self) -> tuple[int, BaseException | None] | None:
+        """Wait for the write in flight: ``(tag, None)`` if it succeeded, ``(tag, error)`` if it failed (an
+        :class:`InputError` for a failed write), None if there is none."""
+        if self._pending is None:
+            return None
+        tag, future = self._pending
+        exc = future.exception()  # an interrupted wait (a second Ctrl-C) keeps the write to collect again
+        self._pending = None
+        return tag, exc
+
+    def close(self) -> None:
+        """Wait for the write in flight (its outcome is dropped unless collected) and stop the thread."""
+        self._pool.shutdown(wait=True)
+        self._pending = None
 
 
 def _reason(exc: BaseException) -> str:

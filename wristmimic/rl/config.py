@@ -101,11 +101,13 @@ class PPOConfig:
     max_frames: int = 200_000_000
     """Training budget in environment frames (all worlds together)."""
     checkpoint_every: int = 50
-    """Write ``checkpoint.pt`` every this many iterations (and always at the end or on Ctrl-C)."""
-    checkpoint_seconds: float = 60.0
-    """Also write ``checkpoint.pt`` after the first iteration of every start or resume and then whenever this many
-    seconds have passed since the last one, so a kill loses at most this long (or one iteration, if longer);
-    0: after every iteration."""
+    """Write ``checkpoint.pt`` every this many iterations (and always at the end or on Ctrl-C); only matters when
+    ``checkpoint_seconds`` > 0."""
+    checkpoint_seconds: float = 0.0
+    """Write ``checkpoint.pt`` after the first iteration of every start or resume and then whenever this many
+    seconds have passed since the last one. 0 (the default): after every iteration, written in the background
+    while the next one runs, so a kill loses at most the iteration being written and the one in progress; > 0
+    (runs from before asynchronous checkpoints recorded 60): fewer writes, a kill loses up to this long."""
     eval_every: int = 0
     """Every this many iterations, run ``eval_trials`` frame-0 trials of the quick protocol with the current policy
     and log ``eval/success_rate`` (0: never)."""

@@ -17,7 +17,14 @@ import torch
 
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError, WristmimicError
-from wristmimic.rl.checkpoint import CHECKPOINT_NAME, rng_state, save_checkpoint, set_rng_state
+from wristmimic.rl.checkpoint import (
+    CHECKPOINT_NAME,
+    CheckpointWriter,
+    rng_state,
+    save_checkpoint,
+    set_rng_state,
+    snapshot,
+)
 from wristmimic.rl.config import PPOConfig
 from wristmimic.rl.curriculum import ObjectCurriculum
 from wristmimic.rl.logger import EpisodeStats, MetricsCsv, train_progress
@@ -98,6 +105,8 @@ class Runner:
         self.saved_iteration: int | None = None
         """Iteration of the checkpoint in ``run_dir`` (None: none written or loaded)."""
         self._last_save = _clock()
+        self._writer: CheckpointWriter | None = None
+        """The background checkpoint writer while :meth:`learn` runs."""
         self._obs_ok = torch.ones(cfg.horizon + 1, cfg.num_envs, dtype=torch.bool, device=dev)
         """(H + 1, N) whether each world's raw observation was finite at each step of the rollout (and after it)."""
 
@@ -105,15 +114,19 @@ class Runner:
         """Train until ``max_frames`` environment frames, Ctrl-C or ``should_stop()`` (asked after each iteration,
         e.g. a Ray driver's stop request); returns ``"finished"`` / ``"interrupted"`` (a checkpoint is saved).
 
-        A checkpoint is written after the first iteration, then every ``checkpoint_every`` iterations and whenever
-        ``checkpoint_seconds`` have passed since the last one. Every iteration checks that its observations,
-        actions, rewards, values, losses, parameters, optimiser state and normaliser are finite; if not, or if a
-        write fails, :class:`TrainingError` is raised, ``metrics.csv`` is cut back to the last checkpoint (which
-        is kept as it was) and nothing else is written."""
+        A checkpoint is due after the first iteration, then every ``checkpoint_every`` iterations and whenever
+        ``checkpoint_seconds`` have passed since the last one (0, the default: after every iteration). It is
+        written in the background (:class:`CheckpointWriter`) while the next iteration runs; that iteration
+        waits for the write after its update (a failed write raises there), before its ``metrics.csv`` row, so a
+        kill loses at most the iteration being written and the one in progress. Every iteration checks that its
+        observations, actions, rewards, values, losses, parameters, optimiser state and normaliser are finite; if
+        not, or if a write failed, :class:`TrainingError` is raised, ``metrics.csv`` is cut back to the last
+        checkpoint (which is kept as it was) and nothing else is written."""
         self.metrics = self.metrics or MetricsCsv(self.run_dir / "metrics.csv")
         desc = f"{self.metadata['scene']} [{self.metadata['variant']}]"
         first = True
         self._last_save = _clock()
+        self._writer = CheckpointWriter(self.run_dir / CHECKPOINT_NAME)
         try:
             with stop_on_ctrl_c(self), train_progress(desc, self.frames, max_frames, progress) as bar:
                 while self.frames < max_frames and not self.stop_requested:
@@ -123,6 +136,7 @@ class Runner:
                         self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
                     episode_row = self.collect()
                     losses = self.alg.update(self.storage, self.gen)
+                    self._collect_write()  # the previous iteration's checkpoint: on disk before this one's row
                     self.check_finite(self.iteration + 1, losses)
                     self.storage.clear()
                     dt = time.perf_counter() - t0
@@ -142,20 +156,40 @@ class Runner:
                         raise self._error(f"metrics.csv {exc.problem}") from None
                     bar.update(self.frames, row)
                     if first or self._checkpoint_due():
-                        self.save()
+                        self.save(wait=False)
                     first = False
                     if should_stop is not None and should_stop():
                         self.stop_requested = True
+            self._collect_write()
             if self.saved_iteration != self.iteration:
                 self.save()
         except BaseException:
+            with contextlib.suppress(BaseException):  # a write in flight may still land: keep its rows
+                self._collect_write()
             self._rollback_metrics()
             raise
+        finally:
+            self._writer.close()
+            self._writer = None
         return "interrupted" if self.stop_requested else "finished"
 
     def _checkpoint_due(self) -> bool:
         c = self.cfg
         return self.iteration % c.checkpoint_every == 0 or _clock() - self._last_save >= c.checkpoint_seconds
+
+    def _collect_write(self) -> None:
+        """Wait for the background checkpoint write, if one is in flight: on success it is the folder's checkpoint
+        (``saved_iteration``); a failed one raises :class:`TrainingError` naming its iteration."""
+        done = None if self._writer is None else self._writer.collect()
+        if done is None:
+            return
+        iteration, exc = done
+        if exc is None:
+            self.saved_iteration = iteration
+        elif isinstance(exc, InputError):
+            raise self._error(f"{CHECKPOINT_NAME} {exc.problem}", iteration) from None
+        else:
+            raise exc
 
     def _error(self, problem: str, iteration: int | None = None) -> TrainingError:
         return TrainingError(
@@ -339,11 +373,19 @@ class Runner:
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` (from ``run_dir``'s checkpoint); :class:`InputError` naming the file and the
+        entry when the saved state does not fit the network, optimiser or environment built from its config."""
+        path = self.run_dir / CHECKPOINT_NAME
+        self._check_fits(path, state)
+        with _restoring(path, "policy", "the weights of the network in the checkpoint's config"):
+            self.policy.load_state_dict(state["policy"])
+        with _restoring(path, "optimizer", "the Adam state of the network in the checkpoint's config"):
+            self.alg.optimizer.load_state_dict(state["optimizer"])
+        with _restoring(path, "rng", "the random generator states written by `wristmimic train`"):
+            set_rng_state(state["rng"], self.gen)
+        with _restoring(path, "env", f"the state of {self.cfg.num_envs} worlds of the run's scene"):
+            self.env.load_state_dict(state["env"])
         self.iteration, self.frames, self.seconds = int(state["iteration"]), int(state["frames"]), state["seconds"]
-        self.policy.load_state_dict(state["policy"])
-        self.alg.optimizer.load_state_dict(state["optimizer"])
-        set_rng_state(state["rng"], self.gen)
-        self.env.load_state_dict(state["env"])
         self.obs = state["obs"].to(self.env.device)
         self.stats.load_state_dict(state["episodes"])
         if "noise" in state:
@@ -359,22 +401,85 @@ class Runner:
         self.metrics = MetricsCsv(self.run_dir / "metrics.csv", keep_until=self.iteration)
         self.saved_iteration = self.iteration
 
-    def save(self) -> Path:
+    def _check_fits(self, path: Path, state: dict[str, Any]) -> None:
+        """One-line :class:`InputError` for saved weights, optimiser moments or tensors whose names or shapes are
+        not those of the network and environment this run builds (e.g. weights of another network size)."""
+        c = self.cfg
+        net = (
+            f"the network of the checkpoint's config ({self.env.observation_size} observations, actor "
+            f"{list(c.actor_hidden)}, critic {list(c.critic_hidden)}, {self.env.action_size} actions)"
+        )
+        model = {k: tuple(v.shape) for k, v in self.policy.state_dict().items()}
+        saved = {("log_std_param" if k == "log_std" else k): v for k, v in state["policy"].items()}
+        for key, shape in model.items():
+            if key not in saved:
+                raise InputError(path, f"policy.{key}", "missing", net)
+            if tuple(saved[key].shape) != shape:
+                raise InputError(
+                    path, f"policy.{key}", f"shape {list(saved[key].shape)}", f"shape {list(shape)} of {net}"
+                )
+        extra = sorted(set(saved) - set(model))
+        if extra:
+            raise InputError(path, f"policy.{extra[0]}", "not a weight of this network", net)
+        names = {id(p): k for k, p in self.policy.named_parameters()}
+        params = [p for g in self.alg.optimizer.param_groups for p in g["params"]]
+        opt = state["optimizer"]
+        ids = [i for g in opt.get("param_groups", []) for i in g.get("params", [])]
+        if len(ids) != len(params):
+            raise InputError(path, "optimizer.param_groups", f"{len(ids)} parameters", f"{len(params)} of {net}")
+        for i, p in zip(ids, params, strict=True):
+            for k, v in opt.get("state", {}).get(i, {}).items():
+                if torch.is_tensor(v) and v.dim() > 0 and tuple(v.shape) != tuple(p.shape):
+                    raise InputError(
+                        path,
+                        f"optimizer.state.{i}.{k}",
+                        f"shape {list(v.shape)}",
+                        f"shape {list(p.shape)} of {names.get(id(p), 'its parameter')}",
+                    )
+        shapes = {"obs": (c.num_envs, self.env.observation_size), "noise": (c.num_envs, self.env.action_size)}
+        shapes["feedforward"] = tuple(self.env.feedforward.shape)
+        for key, shape in shapes.items():
+            t = state.get(key)
+            if t is not None and (not torch.is_tensor(t) or tuple(t.shape) != shape):
+                got = f"shape {list(t.shape)}" if torch.is_tensor(t) else f"a {type(t).__name__}"
+                raise InputError(path, key, got, f"a tensor of shape {list(shape)} for this run")
+
+    def save(self, wait: bool = True) -> Path:
         """Write ``checkpoint.pt`` atomically; refuses non-finite learned state or observations
-        (:class:`TrainingError`, the previous checkpoint kept), as well as a failed write."""
+        (:class:`TrainingError`, the previous checkpoint kept), as well as a failed write.
+
+        ``wait=False`` (inside :meth:`learn`): snapshot the state into CPU memory and hand it to the background
+        writer; its outcome is taken by :meth:`_collect_write` (``saved_iteration`` is set there)."""
         path = self.run_dir / CHECKPOINT_NAME
+        self._collect_write()  # at most one write in flight
         tensors = [*self._state_tensors(), ("observation", self.obs)]
         if not bool(torch.stack([t.sum().double() for _, t in tensors]).isfinite().all()):
             for name, t in tensors:
                 if not bool(t.isfinite().all()):
                     raise self._error(f"{name} is non-finite: checkpoint not written")
+        self._last_save = _clock()
+        if self._writer is not None:
+            self._writer.submit(snapshot(self.state_dict()), self.iteration)
+            if wait:
+                self._collect_write()
+            return path
         try:
             save_checkpoint(path, self.state_dict())
         except InputError as exc:
             raise self._error(f"{CHECKPOINT_NAME} {exc.problem}") from None
         self.saved_iteration = self.iteration
-        self._last_save = _clock()
         return path
+
+
+@contextlib.contextmanager
+def _restoring(path: Path, key: str, expected: str) -> Iterator[None]:
+    """Turn an error of a ``load_state_dict`` (torch's many-line report, a shape or key error) into one line."""
+    try:
+        yield
+    except (RuntimeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        detail = lines[-1] if lines else type(exc).__name__
+        raise InputError(path, key, f"does not fit this run ({detail[:200]})", expected) from None
 
 
 EVAL_COLUMNS = ("eval/success_rate", "eval/frames_completed", "eval/obj_pos_err_cm", "eval/contact_ratio")
