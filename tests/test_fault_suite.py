@@ -249,6 +249,23 @@ def test_a_pipeline_path_that_is_not_a_string_is_one_line(im, tmp_path: Path) ->
     assert sorted(tmp_path.iterdir()) == [spec]
 
 
+@pytest.mark.parametrize("text", ["{not json", "[1, 2]"])
+def test_a_damaged_pipeline_state_is_one_line_and_kept(im, tmp_path: Path, text: str) -> None:
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "pipeline_state.json").write_text(text)
+    spec = tmp_path / "p.toml"
+    spec.write_text(
+        f'[pipeline]\nwork_dir = "{work}"\n[convert]\nformat = "intermimic"\nsource = "{im["src"]}"\n'
+        f'output = "{tmp_path / "o.h5"}"\n'
+    )
+    _clean_error(runner.invoke(app, ["run", str(spec)]), "pipeline_state.json", "delete the file")
+    assert (work / "pipeline_state.json").read_text() == text and sorted(work.iterdir()) == [
+        work / "pipeline_state.json"
+    ]
+    assert not (tmp_path / "o.h5").exists()
+
+
 # ------------------------------------------------------------------------------ 2. safe_pickle_load messages
 
 

@@ -58,6 +58,20 @@ if TYPE_CHECKING:
 STATE_FILE = "pipeline_state.json"
 
 
+def _read_state(state_file: Path) -> dict[str, Any]:
+    """The recorded stage results of an earlier run ({} if none); one-line error for a damaged file."""
+    if not state_file.exists():
+        return {}
+    expected = "the pipeline's state: a JSON object (delete the file to run every stage again)"
+    try:
+        state = json.loads(state_file.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(state_file, None, f"not valid JSON ({str(exc).splitlines()[0][:120]})", expected) from None
+    if not isinstance(state, dict):
+        raise InputError(state_file, None, f"holds a JSON {type(state).__name__}", expected)
+    return state
+
+
 class Executor(Protocol):
     """Runs the planned jobs elsewhere (:class:`wristmimic.distributed.RayExecutor`): train each job, evaluate it
     when ``evaluate`` (the ``[evaluate]`` table) is given, record both units in ``ctx`` and set
@@ -475,7 +489,7 @@ def run_pipeline(
     work_dir = Path(meta.get("work_dir", Path("runs") / "pipelines" / meta.get("name", Path(path).stem)))
     work_dir.mkdir(parents=True, exist_ok=True)
     state_file = work_dir / STATE_FILE
-    state = json.loads(state_file.read_text()) if state_file.exists() else {}
+    state = _read_state(state_file)
     ctx = Context(Path(path), work_dir, progress, nthread, echo=echo, state=state, spec=spec, executor=executor)
     for name, stage in STAGES.items():
         if name not in spec:
