@@ -80,8 +80,16 @@ def _wristmimic(*args: str | Path, preexec_fn: Callable[[], None] | None = None)
     )  # fmt: skip
 
 
+def _default_sigint() -> None:
+    """``preexec_fn``: SIGINT as a terminal delivers it. A shell's background job (``.ci/run &``) starts with SIGINT
+    ignored, and Python then never installs its KeyboardInterrupt handler, so Ctrl-C tests would see nothing."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(*args: str | Path) -> subprocess.Popen:
-    return subprocess.Popen(_cmd(*args), env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        _cmd(*args), env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint
+    )
 
 
 def _wait_until(proc: subprocess.Popen, ready: Callable[[], bool], what: str, timeout: float = 120) -> None:

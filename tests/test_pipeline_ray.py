@@ -250,8 +250,13 @@ def test_ctrl_c_stops_jobs_keeping_their_checkpoints_and_a_rerun_resumes(tmp_pat
             threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
 
     options = RayOptions("local", 1, 0, 2)
-    with pytest.raises(KeyboardInterrupt):
-        run_pipeline(spec, progress=False, nthread=1, echo=echo, ray=options)
+    # Ctrl-C as a terminal delivers it: a shell's background job (`.ci/run &`) starts with SIGINT ignored
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_pipeline(spec, progress=False, nthread=1, echo=echo, ray=options)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert any("Ctrl-C: every job stops" in s for s in lines), lines
     assert any("stopped: stopped at iteration" in s for s in lines), lines
     (run,) = (tmp_path / "work" / "runs").iterdir()
