@@ -51,3 +51,29 @@ def parahome_h5(tmp_path_factory: pytest.TempPathFactory, hull_cache: Path | Non
     out = tmp_path_factory.mktemp("parahome") / "parahome.h5"
     convert_skillmimic_parahome(src, out, options=ConvertOptions(hull_cache_dir=hull_cache, show_progress=False))
     return out
+
+
+def temporaries(folder: Path) -> list[Path]:
+    """Every ``*.tmp`` file under ``folder`` (what an atomic write leaves when it is interrupted)."""
+    return sorted(p for p in folder.rglob("*") if p.name.endswith(".tmp"))
+
+
+def same_h5(a: Path, b: Path) -> None:
+    """Assert every dataset and attribute of two HDF5 files equal, apart from the creation time."""
+    import h5py
+    import numpy as np
+
+    def walk(g: h5py.Group, out: dict, pre: str = "") -> dict:
+        for k, v in g.attrs.items():
+            out[f"{pre}@{k}"] = v
+        for k, v in g.items():
+            if isinstance(v, h5py.Group):
+                walk(v, out, f"{pre}{k}/")
+            else:
+                out[pre + k] = v[()]
+        return out
+
+    with h5py.File(a) as fa, h5py.File(b) as fb:
+        da, db = walk(fa, {}), walk(fb, {})
+    assert da.keys() == db.keys()
+    assert [k for k in da if k != "@created_utc" and not np.array_equal(np.asarray(da[k]), np.asarray(db[k]))] == []

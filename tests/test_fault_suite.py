@@ -29,7 +29,6 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 import typer
@@ -41,7 +40,7 @@ from wristmimic.cli.main import app
 from wristmimic.errors import InputError
 from wristmimic.safe_io import _HOST, STALE_AFTER_S, safe_pickle_load
 
-from conftest import REPO
+from conftest import REPO, same_h5, temporaries
 from synthetic import converted_intermimic, write_intermimic_folder
 
 SID = "sub1_box_000"
@@ -125,29 +124,6 @@ def _clean_error(r, *fragments: str) -> str:
 def _listing(root: Path) -> dict[str, bytes | None]:
     """Every path under ``root`` with its bytes (None for folders)."""
     return {str(p.relative_to(root)): (None if p.is_dir() else p.read_bytes()) for p in sorted(root.rglob("*"))}
-
-
-def _temporaries(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.rglob("*") if p.name.endswith(".tmp"))
-
-
-def _same_h5(a: Path, b: Path) -> None:
-    """Every dataset and attribute equal, apart from the creation time."""
-
-    def walk(g: h5py.Group, out: dict, pre: str = "") -> dict:
-        for k, v in g.attrs.items():
-            out[f"{pre}@{k}"] = v
-        for k, v in g.items():
-            if isinstance(v, h5py.Group):
-                walk(v, out, f"{pre}{k}/")
-            else:
-                out[pre + k] = v[()]
-        return out
-
-    with h5py.File(a) as fa, h5py.File(b) as fb:
-        da, db = walk(fa, {}), walk(fb, {})
-    assert da.keys() == db.keys()
-    assert [k for k in da if k != "@created_utc" and not np.array_equal(np.asarray(da[k]), np.asarray(db[k]))] == []
 
 
 @pytest.fixture(scope="module")
@@ -352,7 +328,7 @@ def test_a_long_pickle_error_from_the_command_line_is_one_whole_line(tmp_path: P
     out = tmp_path / "h.xml"
     line = _clean_error(runner.invoke(app, ["humanoid", "parahome", str(p), "-o", str(out)]), str(p))
     assert re.search(r"\(ValueError: could not convert string to float: 'one two three [a-z ]+ \.\.\.\)", line), line
-    assert not out.exists() and _temporaries(tmp_path) == []
+    assert not out.exists() and temporaries(tmp_path) == []
 
 
 # ------------------------------------------------------------------------------ 3. the hull cache
@@ -379,12 +355,12 @@ def test_hull_cache_write_killed_then_the_next_conversion_removes_its_temporary(
         [sys.executable, "-c", DIE_IN_CACHE_WRITE, *args], env=ENV, capture_output=True, timeout=300
     )  # fmt: skip
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
-    (stale,) = _temporaries(cache)
+    (stale,) = temporaries(cache)
     assert list(cache.iterdir()) == [stale] and not out.exists()
     m = re.fullmatch(rf"\.([0-9a-f]{{64}})\.npz\.{_HOST}-(\d+)\.[a-z0-9_]{{8}}\.npz\.tmp", stale.name)
     assert m, stale.name
     key, pid = m.group(1), m.group(2)
-    (stale_out,) = [p for p in _temporaries(tmp_path) if p.parent == tmp_path]  # the output was open meanwhile
+    (stale_out,) = [p for p in temporaries(tmp_path) if p.parent == tmp_path]  # the output was open meanwhile
     assert stale_out.name.startswith(f".o.h5.{_HOST}-{pid}.")
     old, fresh = cache / f".{key[:16]}.k2j4h5g6.tmp", cache / f".{key[:16]}.x9y8z7w6.tmp"  # the older naming
     for legacy in (old, fresh):
@@ -402,7 +378,7 @@ def test_hull_cache_write_killed_then_the_next_conversion_removes_its_temporary(
     ])  # fmt: skip
     assert sorted(cache.iterdir()) == [fresh, cache / f"{key}.npz"]  # a legacy one of a possibly live writer stays
     assert sorted(tmp_path.iterdir()) == [cache, out]
-    _same_h5(out, im["ref"])
+    same_h5(out, im["ref"])
 
 
 DECOMPOSE = (
@@ -442,7 +418,7 @@ def test_convert_interrupted_by_ctrl_c_writes_nothing_and_a_rerun_matches(im, tm
     out = tmp_path / "o.h5"
     args = ["convert", "intermimic", im["src"], "-o", out, "--hull-cache", im["cache"], "-q"]
     proc = _start(*args)
-    _wait_until(proc, lambda: bool(_temporaries(tmp_path)), "the output being written")
+    _wait_until(proc, lambda: bool(temporaries(tmp_path)), "the output being written")
     proc.send_signal(signal.SIGINT)  # Ctrl-C while the output file is being written
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stdout + stderr
@@ -452,7 +428,7 @@ def test_convert_interrupted_by_ctrl_c_writes_nothing_and_a_rerun_matches(im, tm
     r = _wristmimic(*args)
     assert r.returncode == 0 and r.stderr == "", r.stderr
     assert list(tmp_path.iterdir()) == [out]
-    _same_h5(out, im["ref"])
+    same_h5(out, im["ref"])
 
 
 TRIALS = 48
@@ -491,7 +467,7 @@ def _rerun_evaluation(im, out: Path, reference: Path, expect_run: int) -> None:
     assert json.loads((out / "timing.json").read_text())["trials_run"] == expect_run  # no saved trial run again
     for name in (f"{SID}.parquet", "summary.json", "summary.csv", "eval.json"):
         assert (out / name).read_bytes() == (reference / name).read_bytes(), name
-    assert _temporaries(out) == []
+    assert temporaries(out) == []
 
 
 def test_evaluate_killed_then_rerun_runs_only_the_unsaved_trials(im, eval_reference: Path, tmp_path: Path) -> None:
@@ -524,7 +500,7 @@ def test_evaluate_interrupted_by_ctrl_c_keeps_its_trials_and_a_rerun_matches(
     assert m, line
     kept = int(m.group(1))
     assert 0 < kept < TRIALS and _trials_in(_parts(out)) == kept  # what it says it kept is on disk
-    assert _temporaries(out) == [] and not (out / f"{SID}.parquet").exists()
+    assert temporaries(out) == [] and not (out / f"{SID}.parquet").exists()
 
     _rerun_evaluation(im, out, eval_reference, TRIALS - kept)
 
@@ -564,7 +540,7 @@ def test_ctrl_c_while_a_part_is_written_keeps_every_completed_trial(
     with pytest.raises(EvalInterrupted) as info:
         evaluate()
     kept = info.value.completed
-    assert CHUNK <= kept < TRIALS and _trials_in(_parts(tmp_path)) == kept and _temporaries(tmp_path) == []
+    assert CHUNK <= kept < TRIALS and _trials_in(_parts(tmp_path)) == kept and temporaries(tmp_path) == []
     monkeypatch.setattr(eval_runner, "atomic_output", real)
     assert evaluate().trials_run == TRIALS - kept
     for name in (f"{SID}.parquet", "summary.json", "summary.csv", "eval.json"):
@@ -620,7 +596,7 @@ def test_train_interrupted_by_ctrl_c_saves_and_resume_matches_an_uninterrupted_r
         torch.set_num_threads(threads)
     assert [int(r["iteration"]) for r in _metrics(run)] == list(range(1, ITERATIONS + 1))  # each iteration once
     assert _metrics(run) == _metrics(once)  # and the numbers of an uninterrupted run
-    assert _temporaries(runs) == []
+    assert temporaries(runs) == []
 
 
 # ------------------------------------------------------------------------------ 5. errors nobody wrapped

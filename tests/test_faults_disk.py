@@ -19,14 +19,12 @@ import sys
 import time
 from pathlib import Path
 
-import h5py
-import numpy as np
 import pandas as pd
 import pytest
 
 from wristmimic.safe_io import _HOST, STALE_AFTER_S, remove_stale_temporaries
 
-from conftest import REPO
+from conftest import REPO, same_h5, temporaries
 from synthetic import converted_intermimic, write_intermimic_folder
 
 SID = "sub1_box_000"
@@ -58,29 +56,6 @@ def _assert_write_error(r: subprocess.CompletedProcess, path: Path) -> None:
     err = r.stderr.strip()
     assert err.startswith("error: ") and "\n" not in err, err
     assert f"{path}: {TOO_LARGE}" in err, err
-
-
-def _temporaries(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.rglob("*") if p.name.endswith(".tmp"))
-
-
-def _same_h5(a: Path, b: Path) -> None:
-    """Every dataset and attribute equal except the creation time."""
-
-    def walk(g: h5py.Group, out: dict, pre: str = "") -> dict:
-        for k, v in g.attrs.items():
-            out[f"{pre}@{k}"] = v
-        for k, v in g.items():
-            if isinstance(v, h5py.Group):
-                walk(v, out, f"{pre}{k}/")
-            else:
-                out[pre + k] = v[()]
-        return out
-
-    with h5py.File(a) as fa, h5py.File(b) as fb:
-        da, db = walk(fa, {}), walk(fb, {})
-    assert da.keys() == db.keys()
-    assert [k for k in da if k != "@created_utc" and not np.array_equal(np.asarray(da[k]), np.asarray(db[k]))] == []
 
 
 # ------------------------------------------------------------------------------------------------- convert
@@ -120,12 +95,12 @@ def test_convert_killed_then_rerun_removes_the_stale_temporary(im, tmp_path: Pat
     cmd = [sys.executable, "-m", "wristmimic.cli.main", "convert", "intermimic", str(src), "-o", str(out)]
     proc = subprocess.Popen([*cmd, "--hull-cache", str(cache), "-q"], env=env, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
-    while not _temporaries(tmp_path) and proc.poll() is None and time.monotonic() < deadline:
+    while not temporaries(tmp_path) and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.005)
     proc.kill()  # SIGKILL while the output is being written
     proc.wait(timeout=30)
     assert proc.returncode == -signal.SIGKILL
-    (stale,) = _temporaries(tmp_path)
+    (stale,) = temporaries(tmp_path)
     assert not out.exists() and stale.name.startswith(f".o.h5.{_HOST}-{proc.pid}.")
 
     r = _wristmimic("convert", "intermimic", src, "-o", out, "--hull-cache", cache, "-q")
@@ -133,7 +108,7 @@ def test_convert_killed_then_rerun_removes_the_stale_temporary(im, tmp_path: Pat
     lines = [ln for ln in r.stderr.splitlines() if "stale" in ln]
     assert lines == [f"removed stale temporary file {stale} (left by process {proc.pid}, which is no longer running)"]
     assert sorted(tmp_path.iterdir()) == [out] and "Traceback" not in r.stderr
-    _same_h5(out, ref)
+    same_h5(out, ref)
 
 
 def test_only_temporaries_of_dead_writers_are_removed(tmp_path: Path) -> None:
@@ -210,7 +185,7 @@ def test_evaluate_cannot_write_a_part(trained, tmp_path: Path) -> None:
     assert (ref / "eval.json").stat().st_size < fsize < (ref / part).stat().st_size
     r = _wristmimic("evaluate", run, *EVAL_ARGS, "-o", tmp_path, fsize=fsize)
     _assert_write_error(r, tmp_path / part)
-    assert _temporaries(tmp_path) == [] and _final_files(tmp_path) == []
+    assert temporaries(tmp_path) == [] and _final_files(tmp_path) == []
     assert not (tmp_path / part).exists()
     assert json.loads((tmp_path / "eval.json").read_text()) == json.loads((ref / "eval.json").read_text())
 
@@ -224,7 +199,7 @@ def test_evaluate_cannot_write_its_table_then_a_rerun_runs_no_trial_again(traine
     parts = {p: p.read_bytes() for p in (out / "parts").rglob("*.parquet")}
     r = _wristmimic("evaluate", run, *EVAL_ARGS, "-o", out, fsize=0)
     _assert_write_error(r, out / f"{SID}.parquet")
-    assert _temporaries(out) == [] and _final_files(out) == []
+    assert temporaries(out) == [] and _final_files(out) == []
     assert {p: p.read_bytes() for p in (out / "parts").rglob("*.parquet")} == parts  # nothing lost
 
     assert _evaluate(run, out).trials_run == 0
@@ -254,4 +229,4 @@ def test_a_damaged_part_is_said_and_recomputed_alone(trained, tmp_path: Path, ca
     a, b = pd.read_parquet(ref / f"{SID}.parquet"), pd.read_parquet(again.parquet)
     pd.testing.assert_frame_equal(a, b, check_exact=True)
     assert again.parquet.read_bytes() == (ref / f"{SID}.parquet").read_bytes()
-    assert _temporaries(tmp_path) == []
+    assert temporaries(tmp_path) == []
