@@ -132,3 +132,61 @@ def test_written_files_get_the_usual_permissions(tmp_path: Path) -> None:
     umask = os.umask(0)
     os.umask(umask)
     assert (tmp_path / "out.txt").stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+_CTRL_C_SCRIPT = """
+import collections, os, signal, sys, threading, time
+from pathlib import Path
+import numpy as np
+from wristmimic.format import DatasetWriter
+from wristmimic.format.records import HumanoidRecord
+
+signal.signal(signal.SIGINT, signal.default_int_handler)
+n = 200_000
+human = HumanoidRecord(name="h", family="smplx", mjcf="<mujoco/>" * 100_000,
+                       body_names=[f"body_{i}" for i in range(n)], parents=np.full(n, -1, np.int32),
+                       joint_bodies=np.zeros(0, np.int32), roles={})
+folder = Path(sys.argv[1])
+def writer(out):
+    return DatasetWriter(out, source_dataset="x", source_format="y", converter="z", input_sha256={})
+t0 = time.perf_counter()
+with writer(folder / "time.h5") as w:
+    w.add_humanoid("h", human)
+one = time.perf_counter() - t0
+(folder / "time.h5").unlink()
+seen = collections.Counter()
+for k in range(40):
+    out = folder / f"o{k}.h5"
+    timer = threading.Timer(one * (k + 0.5) / 40, os.kill, (os.getpid(), signal.SIGINT))
+    try:
+        with writer(out) as w:
+            timer.start()
+            w.add_humanoid("h", human)
+            w.add_humanoid("h2", human)
+        timer.join()
+        time.sleep(0.05)
+    except KeyboardInterrupt:
+        seen["interrupted"] += 1
+        assert not out.exists(), out
+    except BaseException as exc:
+        seen[type(exc).__name__] += 1
+    left = sorted(p.name for p in folder.iterdir() if p.name != out.name)
+    assert left == [], left
+    out.unlink(missing_ok=True)
+print(dict(seen))
+"""
+
+
+def test_ctrl_c_in_the_middle_of_an_hdf5_string_write_is_a_clean_interrupt(tmp_path: Path) -> None:
+    """h5py converts variable-length strings in a Python callback. A KeyboardInterrupt raised inside it broke
+    HDF5's state: ``TypeError: Operation not defined for data type class`` or a segfault on close (seen in
+    ``convert`` under Ctrl-C). SIGINT is sent at 40 moments of such writes, in a subprocess: each one must end as
+    a plain KeyboardInterrupt with no file left behind."""
+    import subprocess
+    import sys
+
+    r = subprocess.run(
+        [sys.executable, "-c", _CTRL_C_SCRIPT, str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip() == "{'interrupted': 40}", r.stdout + r.stderr[-2000:]

@@ -8,9 +8,11 @@ import hashlib
 import os
 import pickle
 import re
+import signal
 import socket
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator
@@ -136,6 +138,34 @@ def remove_stale_temporaries(path: str | Path, report: Callable[[str], None] | N
         removed.append(parent / entry.name)
         (report or _stderr)(f"removed stale temporary file {removed[-1]} ({why})")
     return removed
+
+
+@contextlib.contextmanager
+def defer_sigint() -> Iterator[None]:
+    """Hold Ctrl-C back for the duration of the block and raise it when the block ends.
+
+    Libraries with C state (HDF5 above all) must not be interrupted in the middle of a call: a KeyboardInterrupt
+    raised inside an h5py conversion callback comes out as an unrelated ``TypeError`` and leaves the file's
+    caches inconsistent. Only acts in the main thread while Python's default handler is installed; anywhere
+    else it is a no-op.
+    """
+    if threading.current_thread() is not threading.main_thread() or (
+        signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+    ):
+        yield
+        return
+    pending: list[int] = []
+
+    def hold(signum: int, frame: object) -> None:
+        pending.append(signum)
+
+    signal.signal(signal.SIGINT, hold)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if pending:
+        raise KeyboardInterrupt
 
 
 def _stderr(msg: str) -> None:

@@ -13,10 +13,11 @@ import contextlib
 import errno
 import json
 import os
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, TypeVar
 
 import h5py
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from wristmimic import __version__
 from wristmimic.format import schema
 from wristmimic.format.records import HumanoidRecord, ObjectRecord, SequenceRecord
-from wristmimic.safe_io import OutputError, atomic_output
+from wristmimic.safe_io import OutputError, atomic_output, defer_sigint
 
 _STR = h5py.string_dtype()
 
@@ -114,6 +115,21 @@ def _json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, default=default)
 
 
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _whole(method: _F) -> _F:
+    """Run ``method`` with Ctrl-C held back until it returns, so HDF5 is never interrupted mid-call; the
+    KeyboardInterrupt then arrives between records and the writer removes its temporary file cleanly."""
+
+    def run(*args: Any, **kwargs: Any) -> Any:
+        with defer_sigint():
+            return method(*args, **kwargs)
+
+    run.__name__, run.__doc__ = method.__name__, method.__doc__
+    return run  # type: ignore[return-value]
+
+
 class DatasetWriter:
     """Context manager that writes one canonical file atomically.
 
@@ -157,15 +173,16 @@ class DatasetWriter:
         self._ctx = atomic_output(self.path)
         tmp = self._ctx.__enter__()
         try:
-            self._sink = GuardedFile(tmp)
-            self._f = h5py.File(self._sink, "w")
-            for k, v in {
-                **self._attrs,
-                **{k: _json(v) if isinstance(v, dict | list) else v for k, v in self._extra.items()},
-            }.items():
-                self._f.attrs[k] = v
-            for g in ("humanoids", "objects", "sequences", "index"):
-                self._f.create_group(g)
+            with defer_sigint():
+                self._sink = GuardedFile(tmp)
+                self._f = h5py.File(self._sink, "w")
+                for k, v in {
+                    **self._attrs,
+                    **{k: _json(v) if isinstance(v, dict | list) else v for k, v in self._extra.items()},
+                }.items():
+                    self._f.attrs[k] = v
+                for g in ("humanoids", "objects", "sequences", "index"):
+                    self._f.create_group(g)
             self.check()
         except BaseException as exc:
             self._abort(exc)
@@ -176,7 +193,8 @@ class DatasetWriter:
         if ev is None:
             try:
                 self.check()
-                self._write_index()
+                with defer_sigint():
+                    self._write_index()
                 self._close()
                 self.check()
             except BaseException as exc:
@@ -191,6 +209,7 @@ class DatasetWriter:
         if self._sink is not None and self._sink.error is not None:
             raise OutputError.from_os(self.path, self._sink.error)
 
+    @_whole
     def _close(self) -> None:
         """Close the HDF5 file (HDF5 flushes its caches through the guarded file), then the file itself."""
         try:
@@ -203,7 +222,7 @@ class DatasetWriter:
     def _abort(self, exc: BaseException) -> None:
         """Close everything, delete the temporary file and raise :class:`OutputError` if a write failed (whatever
         else went wrong then is a consequence), else ``exc``."""
-        with contextlib.suppress(Exception):
+        with contextlib.suppress(BaseException):  # a second Ctrl-C while closing must not keep the temporary file
             self._close()
         if self._sink is not None and self._sink.error is not None and not isinstance(exc, KeyboardInterrupt):
             exc = OutputError.from_os(self.path, self._sink.error)
@@ -223,6 +242,7 @@ class DatasetWriter:
     def has_object(self, oid: str) -> bool:
         return oid in self.file["objects"]
 
+    @_whole
     def add_humanoid(self, hid: str, h: HumanoidRecord) -> None:
         self.check()
         g = self.file["humanoids"].create_group(hid)
@@ -238,6 +258,7 @@ class DatasetWriter:
             r.create_dataset(name, data=np.asarray(idx, dtype=np.int32))
         self.check()
 
+    @_whole
     def add_object(self, oid: str, o: ObjectRecord) -> None:
         self.check()
         g = self.file["objects"].create_group(oid)
@@ -271,6 +292,7 @@ class DatasetWriter:
         g.create_dataset("surface_points", data=np.asarray(o.surface_points, np.float32))
         self.check()
 
+    @_whole
     def add_sequence(self, sid: str, s: SequenceRecord) -> None:
         self.check()
         g = self.file["sequences"].create_group(sid)
