@@ -98,6 +98,10 @@ def test_foreign_and_truncated_files_get_one_line_errors(synth_h5: Path, tmp_pat
     text = tmp_path / "notes.h5"
     text.write_text("hello")
     assert validate(text)[0].startswith(str(text))
+    with pytest.raises(InputError, match="is a folder, expected a canonical .h5 file"):
+        open_dataset(tmp_path)
+    with pytest.raises(InputError, match="no such file"):
+        open_dataset(tmp_path / "missing.h5")
 
 
 def test_writer_leaves_nothing_behind_on_failure(tmp_path: Path) -> None:

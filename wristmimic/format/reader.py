@@ -110,6 +110,8 @@ class Dataset:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
+        if self.path.is_dir():
+            raise InputError(self.path, None, "is a folder, expected a canonical .h5 file")
         if not self.path.is_file():
             raise InputError(self.path, None, "no such file")
         try:
