@@ -25,14 +25,30 @@ def _forward_sensors(model: mujoco.MjModel, qpos: np.ndarray, qvel: np.ndarray, 
     return d.sensordata.copy()
 
 
+def _last_substep_sensors(model: mujoco.MjModel, state: np.ndarray, ctrl: np.ndarray, substeps: int) -> np.ndarray:
+    """Sensors evaluated by the last of ``substeps`` plain ``mj_step`` calls (at that substep's start)."""
+    d = mujoco.MjData(model)
+    mujoco.mj_setState(model, d, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    d.ctrl[:] = ctrl
+    for _ in range(substeps):
+        mujoco.mj_step(model, d)
+    return d.sensordata.copy()
+
+
 def test_sensors_after_a_step_are_those_of_the_new_state(env: WristMimicEnv) -> None:
+    """Frame sensors are those of the state just reached; contact sensors those of the last substep."""
     be, m = env.backend, env.scene.model
     qpos, qvel = env.reference_state(torch.tensor([0, 4, 9]))
     be.reset(torch.ones(3, dtype=torch.bool), qpos, qvel)
     gen = torch.Generator().manual_seed(0)
     kin = [s for n, s in env.scene.sensors.items() if n.split(":")[0] in ("pos", "quat", "linvel", "angvel")]
     cols = np.concatenate([np.arange(s.start, s.stop) for s in kin])
+    contact = be.contact_columns
+    assert len(contact) and not np.isin(contact, cols).any()
+    assert len(cols) + len(contact) == m.nsensordata
+    touched = 0
     for _ in range(3):
+        before = be.state.copy()
         ctrl = env.action_to_ctrl(0.3 * torch.randn(3, env.action_size, generator=gen), torch.tensor([5, 9, 14]))
         full = torch.zeros(3, m.nu, dtype=torch.float64)
         full[:, env._act_cols] = ctrl.double()
@@ -40,5 +56,9 @@ def test_sensors_after_a_step_are_those_of_the_new_state(env: WristMimicEnv) -> 
         for w in range(3):
             want = _forward_sensors(m, be.qpos[w].numpy(), be.qvel[w].numpy(), full[w].numpy())
             got = be.sensordata[w].numpy()
-            np.testing.assert_allclose(got[cols], want[cols], atol=1e-9)  # poses and velocities
-            np.testing.assert_allclose(got, want, atol=1e-6 * max(1.0, np.abs(want).max()))  # contact forces too
+            np.testing.assert_allclose(got[cols], want[cols], atol=1e-9)  # poses and velocities at the new state
+            last = _last_substep_sensors(m, before[w], full[w].numpy(), env.scene.config.substeps)
+            scale = max(1.0, np.abs(last[contact]).max())
+            np.testing.assert_allclose(got[contact], last[contact], atol=1e-6 * scale)  # contacts of the last substep
+            touched += int(np.abs(last[contact]).sum() > 0)
+    assert touched > 0, "no contact in the test: it would not check the contact columns"

@@ -71,14 +71,40 @@ def make_backend(name: str, model: mujoco.MjModel, num_worlds: int, nthread: int
     raise ValueError(f"unknown physics backend {name!r}: expected one of {', '.join(BACKENDS)}")
 
 
+def contact_sensor_columns(model: mujoco.MjModel) -> np.ndarray:
+    """sensordata columns of every contact sensor of ``model`` (sorted)."""
+    cols = [
+        np.arange(model.sensor_adr[i], model.sensor_adr[i] + model.sensor_dim[i])
+        for i in range(model.nsensor)
+        if model.sensor_type[i] == mujoco.mjtSensor.mjSENS_CONTACT
+    ]
+    return np.concatenate(cols) if cols else np.zeros(0, dtype=np.int64)
+
+
+def probe_model(model: mujoco.MjModel, kinematic: bool) -> mujoco.MjModel:
+    """A copy of ``model`` whose step does not move time (timestep 1e-12, Euler): stepping it once evaluates
+    the sensors of a state without changing it. ``kinematic``: no contacts, constraints or actuation either, so
+    only frame (position, orientation, velocity) sensors are meaningful, at a fraction of the cost."""
+    probe = copy.deepcopy(model)
+    probe.opt.timestep = 1e-12
+    if kinematic:
+        probe.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+        d = mujoco.mjtDisableBit
+        probe.opt.disableflags |= int(d.mjDSBL_CONTACT | d.mjDSBL_CONSTRAINT | d.mjDSBL_ACTUATION | d.mjDSBL_EULERDAMP)
+    return probe
+
+
 class CpuRolloutBackend:
     """MuJoCo on CPU threads through ``mujoco.rollout`` (the C++ thread pool releases the GIL).
 
-    Sensor values after :meth:`step` and :meth:`reset` are those of the state just reached: ``mj_step``
-    evaluates sensors before it integrates, so after the substeps one more batched pass of a zero-length step
-    (the probe model, timestep 1e-12, the controls just held) evaluates them at the new state. Every control
-    step starts from a cleared solver warm start (the warm start is not part of the saved state), which the
-    Warp backend reproduces.
+    Sensor values after :meth:`step`: positions, orientations and velocities are those of the state just
+    reached; contact sensors (found, net force, touch) are those of the last physics substep, i.e. the contacts
+    and constraint forces that acted while stepping to it. ``mj_step`` evaluates sensors before it integrates,
+    so after the substeps a batched zero-length step of a kinematics-only probe model (timestep 1e-12, Euler, no
+    contacts, constraints or actuation: a quarter of a full step's cost) evaluates the frame sensors at the new
+    state. After :meth:`reset` there is no last substep: a full zero-length step gives every sensor, contacts
+    included, at the new state. Every control step starts from a cleared solver warm start (the warm start is
+    not part of the saved state), which the Warp backend reproduces.
     """
 
     device = torch.device("cpu")
@@ -90,9 +116,11 @@ class CpuRolloutBackend:
         self.nstate = mujoco.mj_stateSize(model, _STATE)
         self._datas = [mujoco.MjData(model) for _ in range(self.nthread)]
         self._pool = rollout.Rollout(nthread=self.nthread)
-        # a model whose step does not move time: evaluates sensors of given states in batch
-        self._probe = copy.deepcopy(model)
-        self._probe.opt.timestep = 1e-12
+        # models whose step does not move time: evaluate sensors of given states in batch
+        self._probe = probe_model(model, kinematic=False)
+        self._kinematic = probe_model(model, kinematic=True)
+        self.contact_columns = contact_sensor_columns(model)
+        """sensordata columns of contact sensors: after :meth:`step` these come from the last substep."""
         d = mujoco.MjData(model)
         mujoco.mj_forward(model, d)
         self._state = np.zeros((self.num_worlds, self.nstate))
@@ -143,7 +171,7 @@ class CpuRolloutBackend:
         st[:, self._qvel] = qvel.cpu().numpy()[ids]
         st[:, 1 + self.model.nq + self.model.nv :] = 0.0
         t0 = time.perf_counter()
-        self._sensor[ids] = self._sensors_at(st, np.zeros((len(ids), 1, self.model.nu)))
+        self._sensor[ids] = self._sensors_at(self._probe, st, np.zeros((len(ids), 1, self.model.nu)))
         self.physics_seconds += time.perf_counter() - t0
         self._state[ids] = st
 
@@ -166,14 +194,16 @@ class CpuRolloutBackend:
             sensordata=self._out_sensor,
         )
         self._state[:] = self._out_state[:, -1]
-        # sensors of the state just reached (the last substep's sensors are those of its start)
-        self._sensor[:] = self._sensors_at(self._state, np.ascontiguousarray(c[:, :1]))
+        # frame sensors of the state just reached; contact sensors of the last substep (evaluated at its start)
+        self._sensor[:] = self._sensors_at(self._kinematic, self._state, np.ascontiguousarray(c[:, :1]))
+        cols = self.contact_columns
+        self._sensor[:, cols] = self._out_sensor[:, -1, cols]
         self.physics_seconds += time.perf_counter() - t0
 
-    def _sensors_at(self, states: np.ndarray, ctrl: np.ndarray) -> np.ndarray:
+    def _sensors_at(self, probe: mujoco.MjModel, states: np.ndarray, ctrl: np.ndarray) -> np.ndarray:
         """(n, nsensordata) sensors of full-physics ``states`` (n, nstate) under ``ctrl`` (n, 1, nu), contiguous:
-        one zero-length step of the probe model (no time passes; the states are not changed)."""
-        _, sens = self._pool.rollout(self._probe, self._datas, states, ctrl, nstep=1)
+        one zero-length step of a ``probe`` model (no time passes; the states are not changed)."""
+        _, sens = self._pool.rollout(probe, self._datas, states, ctrl, nstep=1)
         return sens[:, 0]
 
     def close(self) -> None:
