@@ -62,3 +62,22 @@ def test_sensors_after_a_step_are_those_of_the_new_state(env: WristMimicEnv) -> 
             np.testing.assert_allclose(got[contact], last[contact], atol=1e-6 * scale)  # contacts of the last substep
             touched += int(np.abs(last[contact]).sum() > 0)
     assert touched > 0, "no contact in the test: it would not check the contact columns"
+
+
+def test_exact_contacts_evaluates_every_sensor_at_the_new_state(env: WristMimicEnv) -> None:
+    """``exact_contacts=True`` (the behaviour before the kinematic probe) gives contacts of the new state too."""
+    from wristmimic.sim.backend import CpuRolloutBackend
+
+    m = env.scene.model
+    be = CpuRolloutBackend(m, 3, 2, exact_contacts=True)
+    qpos, qvel = env.reference_state(torch.tensor([0, 4, 9]))
+    be.reset(torch.ones(3, dtype=torch.bool), qpos, qvel)
+    ctrl = env.action_to_ctrl(torch.zeros(3, env.action_size), torch.tensor([5, 9, 14]))
+    full = torch.zeros(3, m.nu, dtype=torch.float64)
+    full[:, env._act_cols] = ctrl.double()
+    be.step(full, env.scene.config.substeps)
+    assert np.abs(be.sensordata.numpy()[:, be.contact_columns]).sum() > 0  # contacts to compare
+    for w in range(3):
+        want = _forward_sensors(m, be.qpos[w].numpy(), be.qvel[w].numpy(), full[w].numpy())
+        np.testing.assert_allclose(be.sensordata[w].numpy(), want, atol=1e-6 * max(1.0, np.abs(want).max()))
+    be.close()

@@ -61,9 +61,10 @@ class PhysicsBackend(Protocol):
 
 
 def make_backend(name: str, model: mujoco.MjModel, num_worlds: int, nthread: int | None = None, **kw: object):
-    """A backend by name: ``cpu`` (default) or ``warp`` (``device=`` "cuda" / "cpu", ``nconmax=``, ``njmax=``)."""
+    """A backend by name: ``cpu`` (default; ``exact_contacts=``) or ``warp`` (``device=`` "cuda" / "cpu",
+    ``nconmax=``, ``njmax=``)."""
     if name == "cpu":
-        return CpuRolloutBackend(model, num_worlds, nthread)
+        return CpuRolloutBackend(model, num_worlds, nthread, **kw)  # type: ignore[arg-type]
     if name == "warp":
         from wristmimic.sim.warp_backend import WarpBackend
 
@@ -109,7 +110,9 @@ class CpuRolloutBackend:
 
     device = torch.device("cpu")
 
-    def __init__(self, model: mujoco.MjModel, num_worlds: int, nthread: int | None = None):
+    def __init__(
+        self, model: mujoco.MjModel, num_worlds: int, nthread: int | None = None, exact_contacts: bool = False
+    ):
         self.model = model
         self.num_worlds = int(num_worlds)
         self.nthread = max(1, nthread or os.cpu_count() or 1)
@@ -118,7 +121,10 @@ class CpuRolloutBackend:
         self._pool = rollout.Rollout(nthread=self.nthread)
         # models whose step does not move time: evaluate sensors of given states in batch
         self._probe = probe_model(model, kinematic=False)
-        self._kinematic = probe_model(model, kinematic=True)
+        self.exact_contacts = bool(exact_contacts)
+        """Evaluate every sensor, contacts included, at the state just reached with a full zero-length step after
+        the substeps (the behaviour before 2026-12; a quarter more physics), instead of the kinematic probe."""
+        self._kinematic = self._probe if self.exact_contacts else probe_model(model, kinematic=True)
         self.contact_columns = contact_sensor_columns(model)
         """sensordata columns of contact sensors: after :meth:`step` these come from the last substep."""
         d = mujoco.MjData(model)
@@ -196,8 +202,9 @@ class CpuRolloutBackend:
         self._state[:] = self._out_state[:, -1]
         # frame sensors of the state just reached; contact sensors of the last substep (evaluated at its start)
         self._sensor[:] = self._sensors_at(self._kinematic, self._state, np.ascontiguousarray(c[:, :1]))
-        cols = self.contact_columns
-        self._sensor[:, cols] = self._out_sensor[:, -1, cols]
+        if not self.exact_contacts:
+            cols = self.contact_columns
+            self._sensor[:, cols] = self._out_sensor[:, -1, cols]
         self.physics_seconds += time.perf_counter() - t0
 
     def _sensors_at(self, probe: mujoco.MjModel, states: np.ndarray, ctrl: np.ndarray) -> np.ndarray:

@@ -1,0 +1,51 @@
+"""Physics settings compared by the benchmarks, and the raw ``mj_step`` rate they are measured against.
+
+``BEFORE`` is the physics of the commit issue #15 started from (7b14b30's ``SceneConfig``: 1/120 s x 4 substeps),
+with every sensor evaluated at the state just reached by a full extra forward pass (what the sensor-lag fix
+added); ``NOW`` is today's defaults. The raw rate is plain ``mujoco.rollout`` of the scene's model (``nstep`` =
+substeps per call, no extra sensor pass, solver warm start cleared per call as in the environment), from the
+environment's own states and controls, on the same threads: the ceiling an environment built on it can reach.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+from wristmimic.scene import SceneConfig
+
+
+@dataclass(frozen=True)
+class Settings:
+    name: str
+    scene: SceneConfig
+    backend_options: dict = field(default_factory=dict)
+
+
+BEFORE = Settings("before (7b14b30 physics)", SceneConfig(timestep=1.0 / 120.0, substeps=4), {"exact_contacts": True})
+NOW = Settings("now (defaults)", SceneConfig(), {})
+
+
+def raw_step_rate(
+    model: mujoco.MjModel, states: np.ndarray, ctrl: np.ndarray, substeps: int, nthread: int, seconds: float = 3.0
+) -> float:
+    """Physics steps per second of ``mujoco.rollout`` stepping ``states`` (n, nstate) ``substeps`` steps per call
+    under ``ctrl`` (n, nu), repeated from the same states for ``seconds``."""
+    n = len(states)
+    pool = rollout.Rollout(nthread=nthread)
+    datas = [mujoco.MjData(model) for _ in range(nthread)]
+    c = np.ascontiguousarray(np.broadcast_to(np.asarray(ctrl, np.float64)[:, None], (n, substeps, model.nu)))
+    st = np.ascontiguousarray(states)
+    out = np.empty((n, substeps, len(st[0])))
+    pool.rollout(model, datas, st, c, nstep=substeps, state=out)  # warm-up
+    calls, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        pool.rollout(model, datas, st, c, nstep=substeps, state=out)
+        calls += 1
+    rate = calls * n * substeps / (time.perf_counter() - t0)
+    pool.close()
+    return rate
