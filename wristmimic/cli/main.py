@@ -7,6 +7,7 @@ import typer
 from wristmimic import __version__
 from wristmimic.cli import convert, demo, humanoid, inspect, pipeline, scene, train, validate
 from wristmimic.cli import evaluate as evaluate_cli
+from wristmimic.cli import export as export_cli
 from wristmimic.cli import report as report_cli
 from wristmimic.cli import synth as synth_cli
 from wristmimic.cli import view as view_cli
@@ -26,6 +27,7 @@ app.command("validate")(validate.validate_cmd)
 app.command("scene")(scene.scene_cmd)
 app.command("train")(train.train_cmd)
 app.command("evaluate")(evaluate_cli.evaluate_cmd)
+app.command("export")(export_cli.export_cmd)
 app.command("report")(report_cli.report_cmd)
 app.command("run")(pipeline.run_cmd)
 app.command("synth")(synth_cli.synth_cmd)

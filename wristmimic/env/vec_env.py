@@ -13,6 +13,7 @@ backend), and nothing on the step path waits for the host except on the CPU back
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -182,6 +183,9 @@ class WristMimicEnv:
         self.object_gain = 0.0
         """Gain of the virtual object controller (0: off). Set by the training curriculum; needs a scene built
         with ``SceneConfig(object_actuators=True)``."""
+        self.on_step: Callable[[SimState, torch.Tensor], None] | None = None
+        """Called in :meth:`step` with the state just reached (before any auto-reset) and the actions (a recorder:
+        ``wristmimic.evaluate.export``); ``steps`` is then the frame reached, ``_ctrl`` the PD targets applied."""
         self._obs_layout: dict[str, slice] = {}
         self.observation_size = 0
 
@@ -362,6 +366,8 @@ class WristMimicEnv:
         self.frame += 1
         self.steps += 1
         s = self.sim_state()
+        if self.on_step is not None:
+            self.on_step(s, action)
         rf = self.ref_frame(self.frame)
         hand = self._sim_hand(s)  # shared by reward, terminations and the evaluation errors
         _, phase = self._window()

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+from typing import Protocol as Interface
 
 import numpy as np
 import torch
@@ -108,6 +109,17 @@ def perturb_initial_state(
     return env.observe()
 
 
+class TrialRecorder(Interface):
+    """What :func:`run_trials` tells a recorder (``wristmimic.evaluate.export``) besides the environment's
+    ``on_step`` hook."""
+
+    def begin(self, worlds: torch.Tensor) -> None:
+        """``worlds`` (long) have just been put at frame 0 of a new trial."""
+
+    def end(self, worlds: torch.Tensor, records: Records) -> None:
+        """The trials of ``worlds`` completed (``records``: their rows, in the same order)."""
+
+
 def run_trials(
     env: WristMimicEnv,
     policy: EvalPolicy,
@@ -116,17 +128,22 @@ def run_trials(
     stop: int,
     sink: Callable[[Records], None],
     threads: int | None = None,
+    recorder: TrialRecorder | None = None,
+    trial_ids: np.ndarray | None = None,
 ) -> int:
     """Run trials ``start .. stop - 1`` on ``env``'s worlds; ``sink`` gets each step's completed trials.
 
     The policy and noise run with ``threads`` torch threads (default: the environment's ``math_threads``, 1):
     more OpenMP threads contend with the physics threads on a small machine (measured on 2 cores: the policy
     step took 10x longer with 2 torch threads). Returns the frames stepped by trials (their completed frames).
+    ``trial_ids``: run trials ``trial_ids[start:stop]`` (any trial numbers, seeded as in the full run) instead.
+    ``recorder`` is told when trials begin and end (export records their states).
     """
     before = torch.get_num_threads()
     torch.set_num_threads(threads or env.cfg.math_threads)
+    ids = None if trial_ids is None else torch.as_tensor(np.asarray(trial_ids), dtype=torch.long)
     try:
-        return _run(env, policy, settings, start, stop, sink)
+        return _run(env, policy, settings, start, stop, sink, recorder, ids)
     finally:
         torch.set_num_threads(before)
 
@@ -138,7 +155,12 @@ def _run(
     start: int,
     stop: int,
     sink: Callable[[Records], None],
+    recorder: TrialRecorder | None = None,
+    trial_ids: torch.Tensor | None = None,
 ) -> int:
+    def number(pos: torch.Tensor) -> torch.Tensor:  # a position in start..stop-1 -> its trial number
+        return pos if trial_ids is None else trial_ids[pos]
+
     N, T, dev = env.num_worlds, env.ref.num_frames, env.device
     ref_contact = int(env.ref.hand[1:T].sum())
     sigma = policy.sigma.to(dev, torch.float32)
@@ -146,13 +168,15 @@ def _run(
     take = min(N, stop - start)
     world_trial[:take] = torch.arange(start, start + take)
     nxt = start + take
-    seeds = trial_seeds(settings.base_seed, world_trial.clamp_min(0))
+    seeds = trial_seeds(settings.base_seed, number(world_trial.clamp_min(0)))
     steps = torch.zeros(N, dtype=torch.long)
     sums = TrialSums.zeros(N)
     obs, _ = env.reset(start_frames=torch.zeros(N, dtype=torch.long, device=dev))
     sampled = settings.noise == "actions"
     if not sampled:
         obs = perturb_initial_state(env, torch.arange(take), seeds[:take], settings.initial_state_noise)
+    if recorder is not None:
+        recorder.begin(torch.arange(take))
     frames = 0
     while bool((world_trial >= 0).any()):
         actions = act_rows(policy, obs)
@@ -180,26 +204,29 @@ def _run(
         reasons = info["termination_reason"].cpu()[ids].tolist()
         n_frames = sums.frames[ids]
         frames += int(n_frames.sum())
-        sink(
-            {
-                "trial": world_trial[ids].numpy().copy(),
-                "seed": seeds[ids].numpy().copy(),
-                "success": success.numpy(),
-                "terminated": term.numpy(),
-                "termination_reason": np.array([WristMimicEnv.reason_name(r) for r in reasons], dtype=object),
-                "frames_completed": n_frames.numpy().copy(),
-                "frames_total": np.full(len(ids), T - 1, dtype=np.int64),
-                **{k: v.numpy() for k, v in m.items()},
-            }
-        )
+        rec = {
+            "trial": number(world_trial[ids]).numpy().copy(),
+            "seed": seeds[ids].numpy().copy(),
+            "success": success.numpy(),
+            "terminated": term.numpy(),
+            "termination_reason": np.array([WristMimicEnv.reason_name(r) for r in reasons], dtype=object),
+            "frames_completed": n_frames.numpy().copy(),
+            "frames_total": np.full(len(ids), T - 1, dtype=np.int64),
+            **{k: v.numpy() for k, v in m.items()},
+        }
+        if recorder is not None:
+            recorder.end(ids, rec)
+        sink(rec)
         k = min(len(ids), stop - nxt)
         world_trial[ids[k:]] = -1
         new = ids[:k]
         world_trial[new] = torch.arange(nxt, nxt + k)
         nxt += k
-        seeds[new] = trial_seeds(settings.base_seed, world_trial[new])
+        seeds[new] = trial_seeds(settings.base_seed, number(world_trial[new]))
         steps[ids] = 0
         sums.clear(ids)
         if k and not sampled:
             obs = perturb_initial_state(env, new, seeds[new], settings.initial_state_noise)
+        if k and recorder is not None:
+            recorder.begin(new)
     return frames

@@ -91,6 +91,9 @@ class SequenceView:
         for name, (shape, *_rest) in schema.SEQUENCE_ARRAYS.items():
             per_frame = shape[0] == "T"
             kw[_RECORD_FIELDS.get(name, name)] = self.array(name, frames if per_frame else None)
+        optional = {
+            name: self.array(name, frames) for name in schema.OPTIONAL_SEQUENCE_ARRAYS if name in self._g
+        }  # schema 1.2: exported sequences only
         return SequenceRecord(
             humanoid_id=self.humanoid_id,
             object_ids=list(self.object_ids),
@@ -101,6 +104,7 @@ class SequenceView:
             source_file=self.source_file,
             contact_meta=self.contact_meta,
             extra=dict(self.extra),
+            optional=optional,
             **kw,
         )
 

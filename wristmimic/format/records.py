@@ -101,13 +101,15 @@ class SequenceRecord:
     split: str = ""
     source_file: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    optional: dict[str, np.ndarray] = field(default_factory=dict)
+    """Arrays of ``schema.OPTIONAL_SEQUENCE_ARRAYS`` the sequence has (``sim/actions``, ...), by schema name."""
 
     @property
     def num_frames(self) -> int:
         return int(self.root_pos.shape[0])
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Schema array name -> array."""
+        """Schema array name -> array (the optional ones it has last)."""
         return {
             "root_pos": self.root_pos,
             "root_quat": self.root_quat,
@@ -126,4 +128,5 @@ class SequenceRecord:
             "contacts/object": self.object_contact,
             "contacts/first_contact_frame": self.first_contact_frame,
             "contacts/window": self.contact_window,
+            **self.optional,
         }

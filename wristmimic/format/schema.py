@@ -18,13 +18,14 @@ Layout (T frames, B bodies, J = B - 1 joints, O objects of a sequence)::
                            com (3,) f8, inertia (3,3) f8, surface_points (P,3) f4
     /sequences/<sid>/      attrs: humanoid_id, object_ids (JSON list), subject, text, dataset, split,
                            num_frames, source_file
-                           SEQUENCE_ARRAYS (per frame, chunked along time) and contacts/*
+                           SEQUENCE_ARRAYS (per frame, chunked along time) and contacts/*;
+                           OPTIONAL_SEQUENCE_ARRAYS (sim/*, since 1.2: sequences exported from a simulation)
 """
 
 from __future__ import annotations
 
 FORMAT_NAME = "wristmimic-reference"
-SCHEMA_VERSION = "1.1.0"
+SCHEMA_VERSION = "1.2.0"
 """Semantic version. Readers reject another MAJOR; a MINOR adds optional content old readers ignore."""
 
 FPS = 30.0
@@ -69,7 +70,14 @@ SEQUENCE_ARRAYS: dict[str, tuple[tuple[str | int, ...], str, str, str]] = {
     "contacts/first_contact_frame": ((2,), "int32", "frame", "t_c per hand (left, right); -1 if none"),
     "contacts/window": ((2,), "int32", "frame", "contact window [t_c - t_b, t_c + t_a], clipped; -1 if none"),
 }
-PER_FRAME = [k for k, v in SEQUENCE_ARRAYS.items() if v[0][0] == "T"]
+OPTIONAL_SEQUENCE_ARRAYS: dict[str, tuple[tuple[str | int, ...], str, str, str]] = {
+    "sim/actions": (("T", "D"), "float32", "-", "policy action applied from frame t to t + 1 (last row repeated)"),
+    "sim/pd_targets": (("T", "D"), "float32", "rad", "PD target of each hinge from frame t to t + 1 (last repeated)"),
+    "sim/contact_force": (("T", "B", 3), "float32", "N", "net contact force on each body (all partners) at frame t"),
+}
+"""Since 1.2, only in sequences written by ``wristmimic export`` (D = 3 J hinges, joint_angles order); readers and
+``validate`` check them when present and ignore their absence."""
+PER_FRAME = [k for k, v in (SEQUENCE_ARRAYS | OPTIONAL_SEQUENCE_ARRAYS).items() if v[0][0] == "T"]
 
 OBJECT_ARRAYS = {
     "visual/vertices": (("V", 3), "float32", "m", "visual mesh vertices, object frame"),

@@ -296,14 +296,15 @@ def sequence_array_problems(ds: Dataset, s: SequenceView) -> Iterator[Problem]:
     if not isinstance(names, h5py.Dataset) or names.ndim != 1:
         return  # an unreadable humanoid: humanoid_problems says so
     B = names.shape[0]
-    sym = {"T": T, "B": B, "J": B - 1, "O": O}
+    sym = {"T": T, "B": B, "J": B - 1, "O": O, "D": 3 * (B - 1)}
     arrays: dict[str, np.ndarray] = {}
     g = f[where]
-    for name, (shape, dtype, _unit, _) in schema.SEQUENCE_ARRAYS.items():
+    for name, (shape, dtype, _unit, _) in (schema.SEQUENCE_ARRAYS | schema.OPTIONAL_SEQUENCE_ARRAYS).items():
         key = f"{where}/{name}"
         d = g.get(name)
         if d is None:
-            yield Problem(key, "missing")
+            if name not in schema.OPTIONAL_SEQUENCE_ARRAYS:
+                yield Problem(key, "missing")
             continue
         want = tuple(sym[x] if isinstance(x, str) else x for x in shape)
         ok = True

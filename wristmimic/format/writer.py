@@ -311,7 +311,7 @@ class DatasetWriter:
             }
         )
         for name, arr in s.arrays().items():
-            dtype = schema.SEQUENCE_ARRAYS[name][1]
+            dtype = (schema.SEQUENCE_ARRAYS | schema.OPTIONAL_SEQUENCE_ARRAYS)[name][1]
             a = np.asarray(arr).astype(dtype, copy=False)
             kw: dict[str, Any] = {}
             if name in schema.PER_FRAME and T > 0:
