@@ -14,6 +14,12 @@ def report_cmd(
     out: Path = typer.Option(..., "--out", "-o", help="Report folder, e.g. reports/omomo20."),
     title: str = typer.Option(None, "--title", help="Title of summary.md (default: the folder name)."),
     split: list[str] = typer.Option(None, "--split", help="Keep the scenes of this split (repeatable; eval/splits)."),
+    plausibility: list[Path] = typer.Option(
+        None,
+        "--plausibility",
+        help="Output of `wristmimic export` (repeatable): adds plausibility.csv and a table of the reference "
+        "against its simulated rollouts for every evaluated scene (docs/plausibility.md).",
+    ),
 ) -> None:
     """Write per-scene, per-dataset, method x dataset and ablation tables (CSV), plots (PNG) and summary.md.
 
@@ -22,11 +28,13 @@ def report_cmd(
     Example: wristmimic report runs/*/eval/paper -o reports/omomo20
 
     Example: wristmimic report runs --split omomo20 --split parahome20 -o reports/paper --title "Paper splits"
+
+    Example: wristmimic report runs/RUN/eval/paper --plausibility sim.h5 -o reports/RUN
     """
     from wristmimic.report import build_report
     from wristmimic.safe_io import check_output_folder
 
     with user_errors():
         check_output_folder(out)
-        r = build_report(eval_dirs, out, title, split or None)
+        r = build_report(eval_dirs, out, title, split or None, plausibility or None)
         typer.echo(f"{r.out}: {r.scenes} scene(s), {r.trials:,} trials -> {', '.join(r.files)}")

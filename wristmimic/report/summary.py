@@ -10,6 +10,8 @@ Output folder::
     ablation_<dataset>.csv     per method on the scenes every method of that dataset was evaluated on
     terminations.csv           trials per termination reason
     hands.csv                  per hand, method and dataset (paper Table 4), only when a hand was swapped
+    plausibility.csv           per scene: plausibility metrics of the reference and of its exported rollouts
+                               (only with ``plausibility=[EXPORT.h5, ...]``; docs/plausibility.md)
     success_per_scene.png, error_distributions.png, termination_reasons.png, training_curves.png (if logs exist)
 """
 
@@ -54,12 +56,18 @@ def markdown_table(df: pd.DataFrame, digits: dict[str, int] | None = None) -> st
 
 
 def build_report(
-    eval_dirs: list[Path], out: Path, title: str | None = None, splits: list[str] | None = None
+    eval_dirs: list[Path],
+    out: Path,
+    title: str | None = None,
+    splits: list[str] | None = None,
+    plausibility: list[Path] | None = None,
 ) -> ReportResult:
     """Read evaluation folders and write every table, plot and ``summary.md`` into ``out``.
 
     ``splits`` (names in ``eval/splits`` or paths): keep only their scenes, label datasets by split, and report
     which listed scenes have no evaluation. Without it, the splits the evaluations recorded are used for that.
+    ``plausibility``: files of ``wristmimic export``; adds ``plausibility.csv``, reference against simulation
+    for every evaluated scene.
     """
     check_output_folder(out, None)
     ev = T.load_evals(eval_dirs)
@@ -93,6 +101,13 @@ def build_report(
     hand_t = T.hands(t)
     if len(hand_t):
         written["hands.csv"] = hand_t
+    plaus_t = None
+    if plausibility:
+        from wristmimic.report.plausibility import plausibility_table
+
+        datasets = {s["scene"]: s["dataset"] for s in ev.sources if s.get("dataset")}
+        plaus_t = plausibility_table(sorted(set(t["scene"])), list(plausibility), datasets)
+        written["plausibility.csv"] = plaus_t
     for name, df in written.items():
         T.write_csv(df, out / name)
     res.files += list(written)
@@ -108,7 +123,7 @@ def build_report(
     if runs:
         plots.training_curves(runs, out / "training_curves.png")
         res.files.append("training_curves.png")
-    md = _markdown(title or out.name, t, paper_t, dataset_t, scene_t, abl, ev, bool(runs), cover, hand_t)
+    md = _markdown(title or out.name, t, paper_t, dataset_t, scene_t, abl, ev, bool(runs), cover, hand_t, plaus_t)
     with atomic_output(out / "summary.md") as tmp:
         tmp.write_text(md)
     res.files.append("summary.md")
@@ -126,6 +141,7 @@ def _markdown(
     curves: bool,
     cover: pd.DataFrame,
     hand_t: pd.DataFrame | None = None,
+    plaus_t: pd.DataFrame | None = None,
 ) -> str:
     protocol = t["protocol"].iloc[0] if len(t) else ""
     noise = ", ".join(sorted(set(t["noise"]))) if len(t) else ""
@@ -170,6 +186,15 @@ def _markdown(
     cols = ["dataset_label", "method", "scene", "trials", "success_pct", "success_ci_low_pct", "success_ci_high_pct",
             "obj_pos_err_cm", "obj_rot_err_deg", "contact_ratio", "completion_pct", "frames_completed_mean"]  # fmt: skip
     lines += ["## Per scene", "", markdown_table(scene_t[cols]), ""]
+    if plaus_t is not None:
+        from wristmimic.report.plausibility import markdown_layout
+
+        lines += ["## Physical plausibility: reference / simulation", "",
+                  "Each cell is the reference's value / the mean over the scene's exported rollouts (`-`: none); "
+                  "definitions and thresholds in `docs/plausibility.md`, every metric in `plausibility.csv`. "
+                  "Penetrations are the deepest over the sequence; the simulation's labelled gap is small by "
+                  "construction (an export labels contact where the simulation touches).", "",
+                  markdown_table(markdown_layout(plaus_t)), ""]  # fmt: skip
     lines += ["## Plots", "", "![success per scene](success_per_scene.png)", "",
               "![object error distributions](error_distributions.png)", "",
               "![termination reasons](termination_reasons.png)", ""]  # fmt: skip

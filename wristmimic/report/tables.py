@@ -58,7 +58,7 @@ class EvalSet:
     trials: pd.DataFrame
     """One row per trial: TRIAL_COLUMNS plus LABEL_COLUMNS."""
     sources: list[dict[str, Any]]
-    """Per folder: path, scene, method, run_dir (for training curves)."""
+    """Per folder: path, scene, method, run_dir (for training curves), dataset (the policy's, if recorded)."""
 
 
 def find_eval_dirs(paths: list[Path]) -> list[Path]:
@@ -165,7 +165,10 @@ def load_evals(paths: list[Path]) -> EvalSet:
             df[c] = str(row.get(c, ""))
         frames.append(df)
         run_dir = doc.get("policy", {}).get("run_dir")
-        sources.append({"path": str(d), "scene": scene, "method": row["method"], "run_dir": run_dir})
+        dataset = doc.get("policy", {}).get("dataset")
+        sources.append(
+            {"path": str(d), "scene": scene, "method": row["method"], "run_dir": run_dir, "dataset": dataset}
+        )
     protocols = sorted({f["protocol"].iloc[0] for f in frames if len(f)})
     if len(protocols) > 1:
         raise InputError(
