@@ -311,3 +311,7 @@ def test_report_tables_reference_against_simulation(synth: Path, tmp_path: Path)
     # a file that is not an export is refused in one line
     with pytest.raises(InputError, match="export"):
         build_report([ev], tmp_path / "rep2", plausibility=[synth])
+    # the CLI option
+    r = CliRunner().invoke(app, ["report", str(ev), "--plausibility", str(sim), "-o", str(tmp_path / "rep3")])
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "rep3" / "plausibility.csv").read_text() == (tmp_path / "rep" / "plausibility.csv").read_text()
