@@ -35,9 +35,15 @@ def _last_substep_sensors(model: mujoco.MjModel, state: np.ndarray, ctrl: np.nda
     return d.sensordata.copy()
 
 
-def test_sensors_after_a_step_are_those_of_the_new_state(env: WristMimicEnv) -> None:
-    """Frame sensors are those of the state just reached; contact sensors those of the last substep."""
-    be, m = env.backend, env.scene.model
+def test_the_kinematic_probe_gives_frame_sensors_of_the_new_state_and_contacts_of_the_last_substep(
+    env: WristMimicEnv,
+) -> None:
+    """``exact_contacts=False``: frame sensors are those of the state just reached; contact sensors those of the
+    last substep."""
+    from wristmimic.sim.backend import CpuRolloutBackend
+
+    m = env.scene.model
+    be = CpuRolloutBackend(m, 3, 2, exact_contacts=False)
     qpos, qvel = env.reference_state(torch.tensor([0, 4, 9]))
     be.reset(torch.ones(3, dtype=torch.bool), qpos, qvel)
     gen = torch.Generator().manual_seed(0)
@@ -62,14 +68,14 @@ def test_sensors_after_a_step_are_those_of_the_new_state(env: WristMimicEnv) -> 
             np.testing.assert_allclose(got[contact], last[contact], atol=1e-6 * scale)  # contacts of the last substep
             touched += int(np.abs(last[contact]).sum() > 0)
     assert touched > 0, "no contact in the test: it would not check the contact columns"
+    be.close()
 
 
-def test_exact_contacts_evaluates_every_sensor_at_the_new_state(env: WristMimicEnv) -> None:
-    """``exact_contacts=True`` (the behaviour before the kinematic probe) gives contacts of the new state too."""
-    from wristmimic.sim.backend import CpuRolloutBackend
-
+def test_sensors_after_a_step_are_those_of_the_new_state(env: WristMimicEnv) -> None:
+    """The default backend (the environment's) evaluates every sensor, contacts included, at the new state."""
     m = env.scene.model
-    be = CpuRolloutBackend(m, 3, 2, exact_contacts=True)
+    be = env.backend
+    assert be.exact_contacts
     qpos, qvel = env.reference_state(torch.tensor([0, 4, 9]))
     be.reset(torch.ones(3, dtype=torch.bool), qpos, qvel)
     ctrl = env.action_to_ctrl(torch.zeros(3, env.action_size), torch.tensor([5, 9, 14]))
@@ -80,4 +86,3 @@ def test_exact_contacts_evaluates_every_sensor_at_the_new_state(env: WristMimicE
     for w in range(3):
         want = _forward_sensors(m, be.qpos[w].numpy(), be.qvel[w].numpy(), full[w].numpy())
         np.testing.assert_allclose(be.sensordata[w].numpy(), want, atol=1e-6 * max(1.0, np.abs(want).max()))
-    be.close()

@@ -7,10 +7,9 @@ captured once as a CUDA graph on Warp's own stream (capture is not allowed on th
 uses), and the two streams wait on each other through events, so torch and Warp work is ordered without
 synchronising the host.
 
-Semantics match :class:`wristmimic.sim.backend.CpuRolloutBackend`: frame sensors after :meth:`step` and all
-sensors after :meth:`reset` are those of the state just reached (a forward pass after the substeps, since
-``step`` evaluates sensors before integrating); contact sensors after :meth:`step` are those of the last substep
-(kept across that forward pass); each control step starts from a cleared solver warm start. Warp computes in float32
+Semantics match :class:`wristmimic.sim.backend.CpuRolloutBackend`: sensors after :meth:`step` and :meth:`reset`
+are those of the state just reached (a forward pass after the substeps, since ``step`` evaluates sensors before
+integrating); each control step starts from a cleared solver warm start. Warp computes in float32
 (the CPU backend in float64); ``tests/test_warp_backend.py`` states the tolerances that hold.
 
 Needs the ``warp`` extra: ``pip install 'wristmimic[warp]'`` (``mujoco-warp``, which brings ``warp-lang``).
@@ -26,7 +25,6 @@ import numpy as np
 import torch
 
 from wristmimic.errors import InputError
-from wristmimic.sim.backend import contact_sensor_columns
 
 STATE_FIELDS = ("qpos", "qvel", "act", "time", "ctrl", "sensordata")
 """Warp Data fields saved by :meth:`WarpBackend.state_dict` (everything else is recomputed by the next step)."""
@@ -95,7 +93,6 @@ class WarpBackend:
         self._t["overflow"] = wp.to_torch(self.d.overflow) if hasattr(self.d, "overflow") else None
         self._use_graph = (not self._wpdev.is_cpu) if graph is None else bool(graph and not self._wpdev.is_cpu)
         self._graphs: dict[tuple[str, int], Any] = {}
-        self._contact_cols = torch.as_tensor(contact_sensor_columns(model), dtype=torch.long, device=self.device)
 
     # -- views ---------------------------------------------------------------------------------------------
     @property
@@ -146,9 +143,7 @@ class WarpBackend:
         t["ctrl"].copy_(ctrl.detach().to(self.device, t["ctrl"].dtype))
         t["qacc_warmstart"].zero_()
         self._launch("step", substeps)
-        contacts = t["sensordata"][:, self._contact_cols].clone()  # the last substep's contacts and forces
-        self._launch("forward", 1)  # frame sensors of the state just reached (a step evaluates them before integrating)
-        t["sensordata"][:, self._contact_cols] = contacts
+        self._launch("forward", 1)  # sensors of the state just reached (a step evaluates them before integrating)
 
     def _launch(self, what: str, n: int) -> None:
         """Run ``mjw.step`` n times or ``mjw.forward`` once; on CUDA through a captured graph."""
