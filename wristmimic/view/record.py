@@ -479,7 +479,7 @@ def _log_episode_end(rec: rr.RecordingStream, ref: ReferenceTrack, sim: SimTrack
 PLAUSIBILITY_NAMES = {
     "hand_object_depth_m": "hand pen",
     "body_floor_depth_m": "floor pen",
-    "object_support_depth_m": "support pen",
+    "object_support_depth_m": "supp pen",
     "hand_gap_m": "hand gap",
     "foot_height_m": "foot z",
     "foot_skate_speed_m_s": "skate",
