@@ -172,3 +172,67 @@ def test_jobs_cover_every_dataset_of_a_stage_before_train(tmp_path: Path) -> Non
         {"dataset": str(files[1]), "scenes": ["sub2_box_001"], "seed": 2},
     )
     assert [(j.unit, j.run_dir) for j in one] == [("train sub2_box_001", jobs[3].run_dir)]
+
+
+def _export_spec(tmp: Path, seed: int = 0, trials: int = 2) -> Path:
+    evaluate = '[evaluate]\nprotocol = "quick"\ntrials = 4\nnum_envs = 2\n'
+    export = f'[export]\ntrials = {trials}\nnum_envs = 2\noutput = "{tmp / "sim"}"\n'
+    return _write_spec(tmp, seed=seed, extra=evaluate + export)
+
+
+def test_export_stage_writes_a_valid_file_per_scene_cached_by_content(tmp_path: Path) -> None:
+    """convert -> train -> evaluate -> export: <output>/<scene>.h5 validates and replays the evaluation's first
+    rows by their seeds; a second run does no work; another trial count re-exports only; a retrained checkpoint
+    (another seed) re-exports the same file."""
+    import json
+
+    from wristmimic.format.reader import open_dataset
+    from wristmimic.format.validate import validate
+
+    spec = _export_spec(tmp_path)
+    first = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    assert _statuses(first) == {
+        f"convert {tmp_path / 'data' / 'tiny.h5'}": "ran",
+        "train sub1_box_000": "ran",
+        f"evaluate {first.outputs['runs'][0].name}": "ran",
+        "export sub1_box_000": "ran",
+    }
+    out = tmp_path / "sim" / "sub1_box_000.h5"
+    assert first.outputs["exports"] == [out] and validate(out) == []
+    table = pd.read_parquet(first.outputs["evals"][0] / "sub1_box_000.parquet")
+    with open_dataset(out) as ds:
+        assert set(ds.sequence_ids) == {f"sub1_box_000__sim_{s}" for s in table["seed"][table["trial"] < 2]}
+        prov = json.loads(ds.attrs["export"])
+    assert prov["mode"] == "from-eval" and prov["trials"] == 2 and prov["from_eval"].endswith("eval/quick")
+    assert prov["checkpoint_sha256"] and Path(prov["run"]).name == first.outputs["runs"][0].name
+    stamp = out.stat().st_mtime_ns
+    second = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    assert set(_statuses(second).values()) == {"up to date"} and out.stat().st_mtime_ns == stamp
+    _export_spec(tmp_path, trials=3)
+    third = _statuses(run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None))
+    assert [u for u, s in third.items() if s == "ran"] == ["export sub1_box_000"]
+    with open_dataset(out) as ds:
+        assert len(ds.sequence_ids) == 3
+    _export_spec(tmp_path, seed=1, trials=3)
+    fourth = run_pipeline(spec, progress=False, nthread=1, echo=lambda s: None)
+    assert [s for u, s in _statuses(fourth).items() if not u.startswith("convert")] == ["ran"] * 3
+    with open_dataset(out) as ds:
+        assert json.loads(ds.attrs["export"])["train_seed"] == 1 and validate(out) == []
+
+
+def test_export_stage_errors_are_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[export]\nrows = 1\n")
+    with pytest.raises(InputError, match="unknown key"):
+        load_spec(bad)
+    spec = _write_spec(tmp_path, extra='[evaluate]\nprotocol = "quick"\n[export]\nseed = 3\n')
+    from wristmimic.pipeline import Context, export_stage
+
+    ctx = Context(spec, tmp_path / "work", spec=load_spec(spec))
+    with pytest.raises(InputError, match="no trained run"):
+        export_stage(ctx, {})
+    ctx.outputs["jobs"] = ["a planned job"]  # the settings are checked before any job is looked at
+    with pytest.raises(InputError, match="given with an evaluation to replay"):
+        export_stage(ctx, {"seed": 3})
+    with pytest.raises(InputError, match="an integer >= 1"):
+        export_stage(ctx, {"trials": 0})

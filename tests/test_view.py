@@ -397,3 +397,124 @@ def test_shared_parahome_reference_with_inferred_supports(parahome_h5: Path, tmp
     assert len(frames) == summary.ref_frames == seq.num_frames
     np.testing.assert_array_equal(trans[seq.num_frames // 2], body_pos[seq.num_frames // 2, b])
     assert not any(p.startswith("/sim") for p in rec.paths)
+
+
+# -- issue #17: the end of an episode, plots over the clip, colours, legends, exported rollouts ---------------
+def blueprint_views(path: Path) -> dict[str, dict[str, list]]:
+    """View name -> its blueprint components (e.g. ``TimeAxis:view_range``) read back from the recording."""
+    reader = rr.chunk.RrdReader(path)
+    rows: dict[str, dict[str, list]] = {}
+    for chunk in reader.stream(store=reader.blueprints()[0]).to_chunks():
+        if not chunk.entity_path.startswith("/view/"):
+            continue
+        b = chunk.to_record_batch()
+        view = chunk.entity_path.split("/")[2]
+        rows.setdefault(view, {}).update({n: b.column(n).to_pylist()[-1] for n in b.schema.names if ":" in n})
+    return {r["ViewBlueprint:display_name"][0]: r for r in rows.values() if "ViewBlueprint:display_name" in r}
+
+
+def series_names(rec: Recording) -> dict[str, str]:
+    """Series path -> its legend name."""
+    named = [p for p in rec.paths if any("SeriesLines:names" in b.schema.names for b in rec.batches[p])]
+    return {p: rec.static(p, "SeriesLines:names")[0] for p in named}
+
+
+def test_an_early_end_clears_the_simulation_and_is_marked(files, tmp_path: Path) -> None:
+    """Terminated at frame k < T - 1: the simulated geoms are logged at the first frame (not static, which no
+    Clear removes), frame k + 1 clears /sim and the simulated series recursively and shows /episode/end with the
+    frame and reason; every time-series view spans frames 0..T-1; legend names are short; reference and
+    simulated contact series have four distinct colours."""
+    from wristmimic.view.record import LEGEND_CHARS
+
+    path, sid = files["smplx"]
+    env = WristMimicEnv.from_file(path, sid, num_worlds=1, nthread=1)
+    out = tmp_path / "zeros.rrd"
+    summary = record_rollout(env, lambda obs: torch.zeros(obs.shape[0], env.action_size), out)
+    k = summary.sim_frames - 1
+    assert summary.end_reason == "terminated: wrist" and k < T - 1
+    rec = Recording(out)
+    names = env.scene.skeleton.body_names
+    geom = f"/sim/body/{entity_part(names[0])}/geom_0"
+    assert not any("frame" not in b.schema.names for b in rec.batches[geom])  # nothing static under /sim
+    color = next(c for c in rec.batches[geom][0].schema.names if c.endswith(":colors"))
+    assert rec.temporal(geom, color)[0].tolist() == [0]
+    for p in ("/sim", "/metrics/error", "/metrics/contact/sim", "/metrics/reward"):
+        frames, clear = rec.temporal(p, "Clear:is_recursive")
+        assert frames.tolist() == [k + 1] and clear == [[True]], p
+    frames, labels = rec.temporal("/episode/end", "Points3D:labels")
+    assert frames.tolist() == [k + 1] and labels == [[f"episode ended at frame {k}: terminated: wrist"]]
+    _, pos = rec.vectors("/episode/end", "Points3D:positions")
+    _, root = rec.vectors(f"/sim/body/{entity_part(names[0])}", "Transform3D:translation")
+    np.testing.assert_allclose(pos[0], root[-1], atol=1e-6)
+    views = blueprint_views(out)
+    assert "/episode/**" in str(views["reference vs simulation"])
+    for name in ("position error (m)", "rotation error (deg)", "reward", "contact and phase"):
+        assert views[name]["TimeAxis:view_range"] == [{"start": 0, "end": T - 1}], name
+    legend = series_names(rec)
+    assert legend and all(len(n) <= LEGEND_CHARS for n in legend.values()), legend
+    assert legend["/metrics/error/wrist_pos/left"] == "wrist L" and legend["/metrics/error/object_pos/box"] == "box"
+    contact = [f"/metrics/contact/{s}/{h}" for s in ("ref", "sim") for h in ("left", "right")]
+    assert [legend[p] for p in contact] == ["ref L", "ref R", "sim L", "sim R"]
+    colors = [rec.static(p, "SeriesLines:colors")[0] for p in contact]
+    assert len(set(colors)) == 4
+    env.close()
+
+
+def test_a_rollout_to_the_end_of_the_clip_clears_nothing(files, tmp_path: Path) -> None:
+    path, sid = files["smplx"]
+    env = WristMimicEnv.from_file(path, sid, num_worlds=1, config=EnvConfig(wrist_resets=False, termination=NO_END))
+    out = tmp_path / "full.rrd"
+    assert record_rollout(env, reference_targets(env), out).end_reason == "truncated"
+    rec = Recording(out)
+    assert not {"/episode/end", "/sim", "/metrics/error"} & rec.paths  # no clear, no marker
+    env.close()
+
+
+def test_view_an_exported_sequence_beside_its_reference(files, tmp_path: Path) -> None:
+    """`wristmimic view EXPORT.h5 -s <scene>__sim_mean`: the exported frames as /sim beside the reference the
+    provenance names (its reference frames), in the rollout colours, with per-frame plausibility of both."""
+    from wristmimic.evaluate import load_eval_policy
+    from wristmimic.evaluate.export import export_rollouts
+    from wristmimic.plausibility import plausibility_series
+    from wristmimic.rl import TrainSpec, preset, start_run
+    from wristmimic.view.record import LEGEND_CHARS, PALETTE
+
+    path, sid = files["smplx"]
+    ppo = preset("cpu", num_envs=2, horizon=4, max_frames=8, actor_hidden=(16,), critic_hidden=(16,))
+    run = start_run(TrainSpec(path, sid, ppo=ppo, ref_frames=20), tmp_path / "run", nthread=1, progress=False).run_dir
+    sim_h5 = tmp_path / "sim.h5"
+    (seq,) = export_rollouts(load_eval_policy(run), sim_h5, nthread=1, progress=False).sequences
+    out = tmp_path / "export.rrd"
+    r = runner.invoke(app, ["view", str(sim_h5), "-s", seq, "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    rec = Recording(out)
+    with open_dataset(sim_h5) as ds:
+        s = ds.sequence(seq).load()
+        n = s.body_pos.shape[0]
+        sim_plaus = plausibility_series(ds, seq)
+    with open_dataset(path) as ds:
+        names = ds.humanoid(ds.sequence(sid).humanoid_id).body_names
+    assert body_paths("ref", names) | body_paths("sim", names) <= rec.paths
+    frames, trans = rec.vectors(f"/sim/body/{entity_part(names[0])}", "Transform3D:translation")
+    assert frames.tolist() == list(range(n))
+    np.testing.assert_array_equal(trans, s.body_pos[:, 0].astype(np.float32))
+    assert rec.vectors(f"/ref/body/{entity_part(names[0])}", "Transform3D:translation")[0].tolist() == list(range(20))
+    geom = f"/sim/body/{entity_part(names[0])}/geom_0"
+    color = next(c for c in rec.batches[geom][0].schema.names if c.endswith(":colors"))
+    packed = rec.temporal(geom, color)[1][0][0]
+    assert packed == int.from_bytes(bytes(PALETTE.sim_body), "big")  # the rollout blue
+    for metric in ("hand_object_depth_m", "body_floor_depth_m", "body_jerk_m_s3"):
+        assert {f"/metrics/plausibility/{metric}/ref", f"/metrics/plausibility/{metric}/sim"} <= rec.paths
+    f, v = rec.scalars("/metrics/plausibility/body_floor_depth_m/sim")
+    np.testing.assert_allclose(v, sim_plaus["body_floor_depth_m"][f])
+    ref_f, _ = rec.scalars("/metrics/plausibility/body_floor_depth_m/ref")
+    assert ref_f.tolist() == list(range(20))
+    legend = series_names(rec)
+    assert all(len(x) <= LEGEND_CHARS and not x.endswith("~") for x in legend.values()), legend  # none cut
+    views = blueprint_views(out)
+    assert views["penetration and hand gap (m)"]["TimeAxis:view_range"] == [{"start": 0, "end": 19}]
+    if n < 20:  # the tiny policy's episode ended early
+        assert rec.temporal("/sim", "Clear:is_recursive")[0].tolist() == [n]
+    assert seq in rec.static("/info", "TextDocument:text")[0]
+    r = runner.invoke(app, ["view", str(sim_h5), "-s", seq, "--frames", "3", "-o", str(tmp_path / "x.rrd")])
+    assert r.exit_code == 1 and "--frames" in r.output

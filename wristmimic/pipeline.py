@@ -1,4 +1,5 @@
-"""Pipelines: ``wristmimic run pipelines/NAME.toml`` runs convert -> hands -> train -> evaluate -> report.
+"""Pipelines: ``wristmimic run pipelines/NAME.toml`` runs convert -> hands -> train -> evaluate -> export ->
+report.
 
 Each stage is registered in :data:`STAGES` by name; a stage does its work in units (one converted file, one
 trained scene) through :meth:`Context.cached`, which skips a unit whose input fingerprint (content hashes of its
@@ -33,6 +34,10 @@ A pipeline file (paths relative to the current folder)::
     [evaluate]
     protocol = "paper"                   # eval/protocols/<name>.toml; trials = ... overrides
     backend = "cpu"                      # or "warp", as [train]
+    [export]                             # optional: rollouts of each scene -> <output>/<scene>.h5
+    trials = 100                         # the evaluation's first rows (same protocol), else fresh trials
+    successful_only = true
+    output = "datasets/omomo_sim"        # default <work_dir>/export
     [report]                             # output = "reports/omomo" (default <work_dir>/report)
 """
 
@@ -425,6 +430,85 @@ def evaluate_stage(ctx: Context, p: dict[str, Any]) -> None:
 
         ctx.cached(eval_unit(run_dir), eval_inputs(run_dir, p), [out], work)
         ctx.outputs.setdefault("evals", []).append(out)
+
+
+EXPORT_KEYS = {"trials", "successful_only", "protocol", "output", "noise", "seed", "num_envs", "backend", "device"}
+
+
+def export_file(out_dir: Path, job: Job, several_datasets: bool) -> Path:
+    """``<out_dir>/<scene>.h5`` (``<dataset stem>-<scene>.h5`` when the pipeline trains several datasets)."""
+    scene = job.spec.scene
+    return Path(out_dir) / (f"{Path(job.spec.dataset).stem}-{scene}.h5" if several_datasets else f"{scene}.h5")
+
+
+@register("export", EXPORT_KEYS)
+def export_stage(ctx: Context, p: dict[str, Any]) -> None:
+    """Rollouts of every trained scene written as a canonical file ``<output>/<scene>.h5`` (default output
+    ``<work_dir>/export``), one file per scene: each holds one run's humanoid, objects and provenance (the root
+    ``export`` attribute names one checkpoint), and a scene re-exports alone when its checkpoint changes.
+
+    With the ``[evaluate]`` stage under the same protocol, the export re-runs the first ``trials`` rows of that
+    evaluation's table by their seeds (``successful_only``: of its successful rows; default: every row); else
+    ``trials`` fresh trials as ``evaluate`` would run them (``noise``, ``seed``; default: the policy mean).
+    Cached on the checkpoint's hash, the evaluation's files, the protocol, the table and the code version."""
+    from wristmimic.evaluate.export import export_rollouts
+    from wristmimic.evaluate.policy import load_eval_policy
+    from wristmimic.evaluate.protocol import load_protocol
+
+    jobs: list[Job] = ctx.outputs.get("jobs") or []
+    if not jobs:
+        raise InputError(ctx.spec_path, "[export]", "no trained run to export", "a [train] stage before it")
+    evaluate = ctx.spec.get("evaluate")
+    protocol = load_protocol(p.get("protocol", (evaluate or {}).get("protocol", "paper")))
+    trials = p.get("trials")
+    if trials is not None and (isinstance(trials, bool) or not isinstance(trials, int) or trials < 1):
+        raise InputError(ctx.spec_path, "export.trials", f"{trials!r}", "an integer >= 1")
+    if not isinstance(p.get("successful_only", False), bool):
+        raise InputError(ctx.spec_path, "export.successful_only", f"{p['successful_only']!r}", "true or false")
+    replay = evaluate is not None and load_protocol(evaluate.get("protocol", "paper")).name == protocol.name
+    if replay and ("noise" in p or "seed" in p):
+        raise InputError(ctx.spec_path, "export.noise/seed", "given with an evaluation to replay",
+                         "the evaluation's own (leave them out, or export under another protocol)")  # fmt: skip
+    out_dir = Path(p.get("output", ctx.work_dir / "export"))
+    several = len({str(j.spec.dataset) for j in jobs}) > 1
+    for job in jobs:
+        out = export_file(out_dir, job, several)
+        eval_dir = job.run_dir / "eval" / protocol.name if replay else None
+        inputs = {"checkpoint": _hash_path(job.checkpoint), "params": p, "protocol": protocol.to_dict()}
+        inputs |= {"evaluation": _hash_path(eval_dir) if eval_dir else None, "code": wristmimic.__version__}
+
+        def work(job: Job = job, out: Path = out, eval_dir: Path | None = eval_dir) -> None:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            ok_only = bool(p.get("successful_only", False))
+            try:
+                r = export_rollouts(
+                    load_eval_policy(job.run_dir),
+                    out,
+                    trials=trials,
+                    successful_only=ok_only,
+                    from_eval=eval_dir,
+                    protocol=protocol,
+                    noise=p.get("noise"),
+                    seed=p.get("seed"),
+                    num_envs=int(p.get("num_envs", 256)),
+                    nthread=ctx.nthread,
+                    backend=p.get("backend"),
+                    backend_options={"device": p["device"]} if p.get("device") else None,
+                    force=True,
+                    progress=ctx.progress,
+                )
+            except InputError as exc:
+                if not (ok_only and "succeeded" in str(exc)):
+                    raise
+                ctx.echo(f"{out}: not written, no successful trial ({exc})")
+                out.unlink(missing_ok=True)
+                return
+            ctx.echo(f"{out}: {len(r.sequences)} sequence(s) of {r.trials_run} trial(s), {r.successes} successful")
+
+        unit = "export " + (f"{Path(job.spec.dataset).stem}/{job.spec.scene}" if several else job.spec.scene)
+        ctx.cached(unit, inputs, [out], work)
+        if out.is_file():
+            ctx.outputs.setdefault("exports", []).append(out)
 
 
 @register("report", {"output", "title", "splits"})

@@ -8,26 +8,67 @@ import rerun.blueprint as rrb
 POSITION_ERRORS = ["/metrics/error/object_pos/**", "/metrics/error/wrist_pos/**", "/metrics/error/body_pos/**"]
 ROTATION_ERRORS = ["/metrics/error/object_rot/**", "/metrics/error/wrist_rot/**"]
 CONTACT_AND_PHASE = ["/metrics/contact/**", "/metrics/phase"]
+PLAUSIBILITY_VIEWS = {
+    "penetration and hand gap (m)": [
+        "hand_object_depth_m",
+        "body_floor_depth_m",
+        "object_support_depth_m",
+        "hand_gap_m",
+    ],
+    "feet (m, m/s)": ["foot_height_m", "foot_skate_speed_m_s"],
+    "jerk (m/s^3)": ["body_jerk_m_s3", "object_jerk_m_s3"],
+    "floating objects": ["object_float"],
+}
+"""Plausibility metrics (``/metrics/plausibility/<metric>/**``) per view."""
 
 
-def make_blueprint(with_sim: bool, hidden: list[str] | None = None, fps: float = 30.0) -> rrb.Blueprint:
-    """A 3D view of ``/ref/**`` (and ``/sim/**``), time-series views of ``/metrics/**`` and the info text.
+def clip_axis(num_frames: int | None) -> rrb.TimeAxis | None:
+    """An x axis spanning frames 0..num_frames-1 of the ``frame`` timeline, so that series that end early (an
+    episode that terminated) are seen against the whole clip; None: rerun's default (the data's extent)."""
+    if not num_frames:
+        return None
+    span = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.absolute(seq=0), end=rrb.TimeRangeBoundary.absolute(seq=max(num_frames - 1, 1))
+    )
+    return rrb.TimeAxis(view_range=span)
+
+
+def make_blueprint(
+    with_sim: bool,
+    hidden: list[str] | None = None,
+    fps: float = 30.0,
+    num_frames: int | None = None,
+    plausibility: bool = False,
+) -> rrb.Blueprint:
+    """A 3D view of ``/ref/**`` (and ``/sim/**``, ``/episode/**``), time-series views of ``/metrics/**`` (x axis:
+    the whole clip of ``num_frames``) and the info text; ``plausibility``: tabs of the plausibility series.
 
     ``hidden``: entity paths (subtrees) that start hidden in the 3D view, e.g. collision hulls.
     """
-    contents = ["/ref/**", "/sim/**"] if with_sim else ["/ref/**"]
+    contents = ["/ref/**", "/sim/**", "/episode/**"] if with_sim else ["/ref/**"]
     overrides = {p: rrb.EntityBehavior(visible=False) for p in hidden or []}
     scene = rrb.Spatial3DView(
         name="reference vs simulation" if with_sim else "reference", origin="/", contents=contents, overrides=overrides
     )
-    plots: list[rrb.View] = []
+    axis = clip_axis(num_frames)
+
+    def series(name: str, contents: list[str]) -> rrb.TimeSeriesView:
+        return rrb.TimeSeriesView(name=name, origin="/metrics", contents=contents, axis_x=axis)
+
+    plots: list[rrb.Container | rrb.View] = []
     if with_sim:
         plots += [
-            rrb.TimeSeriesView(name="position error (m)", origin="/metrics", contents=POSITION_ERRORS),
-            rrb.TimeSeriesView(name="rotation error (deg)", origin="/metrics", contents=ROTATION_ERRORS),
-            rrb.TimeSeriesView(name="reward", origin="/metrics", contents=["/metrics/reward"]),
+            series("position error (m)", POSITION_ERRORS),
+            series("rotation error (deg)", ROTATION_ERRORS),
+            series("reward", ["/metrics/reward"]),
         ]
-    plots.append(rrb.TimeSeriesView(name="contact and phase", origin="/metrics", contents=CONTACT_AND_PHASE))
+    plots.append(series("contact and phase", CONTACT_AND_PHASE))
+    if plausibility:
+        views = [
+            series(name, [f"/metrics/plausibility/{m}/**" for m in metrics])
+            for name, metrics in PLAUSIBILITY_VIEWS.items()
+        ]
+        plots.append(rrb.Tabs(*views, name="plausibility"))
     text = rrb.Tabs(rrb.TextDocumentView(name="info", origin="/info"), rrb.TextLogView(name="events", origin="/events"))
     return rrb.Blueprint(
         rrb.Horizontal(scene, rrb.Vertical(*plots, text), column_shares=[3, 2]),

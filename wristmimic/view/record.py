@@ -10,18 +10,26 @@ Entity tree (``<src>`` is ``ref`` or ``sim``; names escaped with ``rr.escape_ent
     /<src>/object/<id>/hulls/hull_<k>   collision hulls (static; --hulls; hidden by the blueprint)
     /ref/contacts/{contact,unknown,avoid}  bodies labelled 1 / 0 / -1, as points per frame
     /sim/contacts/object                bodies touching a dynamic object in the simulation
+    /episode/end                        a labelled marker where an episode that ended early ended (from the
+                                        frame after its end, when ``/sim`` and its series are cleared)
     /metrics/error/object_pos/<id>      |p_sim - p_ref| of each dynamic object (m)
     /metrics/error/object_rot/<id>      rotation angle between sim and ref object (deg)
     /metrics/error/wrist_pos/{left,right}, /metrics/error/wrist_rot/{left,right}   (m, deg)
     /metrics/error/body_pos/mean        mean body position error (m)
     /metrics/reward                     the environment's reward of each step
     /metrics/contact/ref/{left,right}   reference hand contact (0/1); /metrics/contact/sim/... simulated
+    /metrics/plausibility/<metric>/{ref,sim}   per-frame plausibility of both (an exported sequence's recording)
     /metrics/phase                      contact-window phase: 0 outside, 1 approach, 2 grasp, 3 stabilise
     /events                             TextLog: first contacts, phase starts, end of the episode
     /info                               TextDocument (markdown): sequence, window, policy, summary
 
 Timelines: ``frame`` (the reference frame, a sequence) and ``time`` (frame / fps, a duration). Everything that
-changes per frame is sent with ``send_columns``, once per entity; shapes and meshes are static.
+changes per frame is sent with ``send_columns``, once per entity; the reference's shapes and meshes are static,
+the simulation's are logged at its first frame (static data cannot be cleared). Series names are at most
+:data:`LEGEND_CHARS` characters (what a legend shows unclipped); the entity path says the rest.
+
+When the simulation ends before the clip (an early termination), the frame after its last state clears
+``/sim`` and the simulated series and shows ``/episode/end``; the time-series views span the whole clip.
 """
 
 from __future__ import annotations
@@ -50,6 +58,8 @@ if TYPE_CHECKING:
     from wristmimic.env.vec_env import WristMimicEnv
 
 APPLICATION_ID = "wristmimic"
+LEGEND_CHARS = 14
+"""Longest series name: longer names are clipped by the legend of a time-series view."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +80,12 @@ class Palette:
     sim_contact: Color = (0, 220, 220, 255)
     left: Color = (40, 120, 230, 255)
     right: Color = (230, 60, 60, 255)
+    ref_left: Color = (255, 140, 0, 255)
+    """Series of the reference: orange tones (as its bodies); of the simulation: blue tones."""
+    ref_right: Color = (180, 80, 0, 255)
+    sim_left: Color = (70, 130, 230, 255)
+    sim_right: Color = (0, 190, 210, 255)
+    episode_end: Color = (220, 30, 30, 255)
 
 
 PALETTE = Palette()
@@ -140,8 +156,12 @@ def write_recording(
     window: WindowConfig | None = None,
     hulls: bool = False,
     recording_id: str | None = None,
+    plausibility: dict[str, dict[str, np.ndarray]] | None = None,
 ) -> RecordingSummary:
-    """Write ``ref`` (and ``sim``) to ``out`` atomically, with the default blueprint embedded."""
+    """Write ``ref`` (and ``sim``) to ``out`` atomically, with the default blueprint embedded.
+
+    ``plausibility``: ``{"ref": series, "sim": series}`` of :func:`wristmimic.plausibility.plausibility_series`,
+    plotted as ``/metrics/plausibility/<metric>/<src>``."""
     window = window or WindowConfig()
     out = Path(out)
     primary = "sim" if sim is not None else "ref"
@@ -150,11 +170,17 @@ def write_recording(
     with atomic_output(out, suffix=".rrd") as tmp:
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or str(uuid.uuid4()))
         try:
-            rec.save(tmp, default_blueprint=make_blueprint(sim is not None, hidden, ref.fps))
+            blueprint = make_blueprint(
+                sim is not None, hidden, ref.fps, num_frames=ref.num_frames, plausibility=bool(plausibility)
+            )
+            rec.save(tmp, default_blueprint=blueprint)
             rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
             _log_reference(rec, ref, geoms, window, ghost=sim is not None, hulls=hulls and primary == "ref")
             if sim is not None:
                 errors = _log_simulation(rec, ref, sim, geoms, hulls)
+                _log_episode_end(rec, ref, sim)
+            if plausibility:
+                _log_plausibility(rec, ref, sim, plausibility)
             _log_events(rec, ref, window, sim)
             text = info_markdown(ref, window, sim, errors)
             rec.log("/info", rr.TextDocument(text, media_type="text/markdown"), static=True)
@@ -231,6 +257,17 @@ def _times(frames: np.ndarray, fps: float) -> list[rr.TimeColumn]:
     return [rr.TimeColumn("frame", sequence=frames), rr.TimeColumn("time", duration=frames / float(fps))]
 
 
+def _log_at(rec: rr.RecordingStream, path: str, archetype: rr.AsComponents, at: int | None, fps: float) -> None:
+    """Log ``archetype`` statically (``at`` None) or at frame ``at`` (then a later ``Clear`` can remove it)."""
+    if at is None:
+        rec.log(path, archetype, static=True)
+        return
+    rec.set_time("frame", sequence=int(at))
+    rec.set_time("time", duration=int(at) / float(fps))
+    rec.log(path, archetype)
+    rec.reset_time()
+
+
 def _send_pose(rec: rr.RecordingStream, path: str, frames: np.ndarray, fps: float, pos: np.ndarray, quat: np.ndarray):
     rec.send_columns(
         path,
@@ -251,11 +288,13 @@ def _log_humanoid(
     quat: np.ndarray,
     color: Color,
     fill: str,
+    at: int | None = None,
 ) -> None:
+    """Geoms of every body (static, or at frame ``at``) and the bodies' poses per frame."""
     for b, name in enumerate(ref.body_names):
         path = f"/{src}/body/{entity_part(name)}"
         for k, g in enumerate(geoms[b]):
-            rec.log(f"{path}/geom_{k}", geom_archetype(g, color, fill), static=True)
+            _log_at(rec, f"{path}/geom_{k}", geom_archetype(g, color, fill), at, ref.fps)
         _send_pose(rec, path, frames, ref.fps, pos[:, b], quat[:, b])
 
 
@@ -283,7 +322,8 @@ def _log_simulation(
     rec: rr.RecordingStream, ref: ReferenceTrack, sim: SimTrack, geoms: list[list[GeomShape]], hulls: bool
 ) -> dict[str, np.ndarray]:
     """``/sim`` (bodies, objects, contacts) and the ``/metrics`` series of the rollout; returns the errors."""
-    _log_humanoid(rec, "sim", ref, geoms, sim.frames, sim.body_pos, sim.body_quat, PALETTE.sim_body, "solid")
+    at = int(sim.frames[0])
+    _log_humanoid(rec, "sim", ref, geoms, sim.frames, sim.body_pos, sim.body_quat, PALETTE.sim_body, "solid", at)
     _log_sim_objects(rec, ref, sim, hulls)
     _log_points(
         rec, "/sim/contacts/object", sim.frames, ref.fps, sim.body_pos, sim.contact_obj, 0.025, PALETTE.sim_contact
@@ -303,17 +343,18 @@ def _log_object(
     color: Color,
     fps: float,
     hulls: bool,
+    at: int | None = None,
 ) -> None:
-    """An object's meshes (static) and pose: per frame, or once when ``frames`` is None."""
+    """An object's meshes (static, or at frame ``at``) and pose: per frame, or once when ``frames`` is None."""
     path = f"/{src}/object/{entity_part(o.id)}"
     if len(o.record.vertices) and len(o.record.faces):
-        rec.log(f"{path}/mesh", mesh_archetype(o.record.vertices, o.record.faces, color), static=True)
+        _log_at(rec, f"{path}/mesh", mesh_archetype(o.record.vertices, o.record.faces, color), at, fps)
     if hulls:
         for k, (v, f) in enumerate(o.record.hulls()):
-            rec.log(f"{path}/hulls/hull_{k}", mesh_archetype(v, f, PALETTE.hull), static=True)
+            _log_at(rec, f"{path}/hulls/hull_{k}", mesh_archetype(v, f, PALETTE.hull), at, fps)
     if frames is None:
         q = wxyz_to_xyzw(np.asarray(quat[0], np.float64))
-        rec.log(path, rr.Transform3D(translation=pos[0], quaternion=rr.Quaternion(xyzw=q)), static=True)
+        _log_at(rec, path, rr.Transform3D(translation=pos[0], quaternion=rr.Quaternion(xyzw=q)), at, fps)
     else:
         _send_pose(rec, path, frames, fps, pos, quat)
 
@@ -326,7 +367,7 @@ def _log_sim_objects(rec: rr.RecordingStream, ref: ReferenceTrack, sim: SimTrack
             j += 1
         else:
             pos, quat, frames, color = o.pos, o.quat, None, PALETTE.static_object
-        _log_object(rec, "sim", o, frames, pos, quat, color, ref.fps, hulls)
+        _log_object(rec, "sim", o, frames, pos, quat, color, ref.fps, hulls, at=int(sim.frames[0]))
 
 
 def _log_points(
@@ -357,17 +398,37 @@ def _log_ref_contacts(rec: rr.RecordingStream, ref: ReferenceTrack) -> None:
         _log_points(rec, f"/ref/contacts/{name}", frames, ref.fps, ref.body_pos, ref.labels == label, radius, color)
 
 
+def short_name(name: str) -> str:
+    """``name`` cut to :data:`LEGEND_CHARS` characters (the end replaced by "~")."""
+    return name if len(name) <= LEGEND_CHARS else name[: LEGEND_CHARS - 1] + "~"
+
+
 def _log_series(
-    rec: rr.RecordingStream, path: str, frames: np.ndarray, fps: float, values: np.ndarray, name: str, color: Color
+    rec: rr.RecordingStream,
+    path: str,
+    frames: np.ndarray,
+    fps: float,
+    values: np.ndarray,
+    name: str,
+    color: Color,
+    width: float | None = None,
 ) -> None:
-    rec.log(path, rr.SeriesLines(names=[name], colors=[color]), static=True)
-    rec.send_columns(path, indexes=_times(frames, fps), columns=rr.Scalars.columns(scalars=np.asarray(values, float)))
+    """A named, coloured line (its legend name at most :data:`LEGEND_CHARS` long); non-finite values left out."""
+    style = rr.SeriesLines(names=[short_name(name)], colors=[color], widths=None if width is None else [width])
+    rec.log(path, style, static=True)
+    values = np.asarray(values, float)
+    ok = np.isfinite(values)
+    if ok.any():
+        rec.send_columns(
+            path, indexes=_times(np.asarray(frames)[ok], fps), columns=rr.Scalars.columns(scalars=values[ok])
+        )
 
 
 def _log_reference_series(rec: rr.RecordingStream, ref: ReferenceTrack, window: WindowConfig) -> None:
     frames = np.arange(ref.num_frames)
-    for k, (side, color) in enumerate((("left", PALETTE.left), ("right", PALETTE.right))):
-        _log_series(rec, f"/metrics/contact/ref/{side}", frames, ref.fps, ref.hand[:, k], f"ref {side} hand", color)
+    for k, (side, color) in enumerate((("left", PALETTE.ref_left), ("right", PALETTE.ref_right))):
+        path = f"/metrics/contact/ref/{side}"
+        _log_series(rec, path, frames, ref.fps, ref.hand[:, k], f"ref {side[0].upper()}", color, width=3.0)
     _log_series(rec, "/metrics/phase", frames, ref.fps, ref.phases(window), "phase", (120, 120, 120, 255))
 
 
@@ -378,15 +439,69 @@ def _log_sim_series(rec: rr.RecordingStream, ref: ReferenceTrack, sim: SimTrack,
         kind, leaf = path.split("/")[3], path.rsplit("/", 1)[-1]
         if leaf in ("left", "right"):
             color = PALETTE.left if leaf == "left" else PALETTE.right
+            name = f"wrist {leaf[0].upper()}"  # the view says position or rotation; the path says the rest
         else:
             color = palette[used.get(kind, 0) % len(palette)]
             used[kind] = used.get(kind, 0) + 1
-        _log_series(rec, path, sim.frames, ref.fps, values, f"{kind} {leaf}", color)
+            name = "body mean" if kind == "body_pos" else leaf
+        _log_series(rec, path, sim.frames, ref.fps, values, name, color)
     hand = sim_hand_contact(ref, sim)
-    for k, (side, color) in enumerate((("left", PALETTE.left), ("right", PALETTE.right))):
-        _log_series(rec, f"/metrics/contact/sim/{side}", sim.frames, ref.fps, hand[:, k], f"sim {side} hand", color)
-    ok = np.isfinite(sim.reward)
-    _log_series(rec, "/metrics/reward", sim.frames[ok], ref.fps, sim.reward[ok], "reward", (90, 90, 90, 255))
+    for k, (side, color) in enumerate((("left", PALETTE.sim_left), ("right", PALETTE.sim_right))):
+        path = f"/metrics/contact/sim/{side}"
+        _log_series(rec, path, sim.frames, ref.fps, hand[:, k], f"sim {side[0].upper()}", color, width=1.5)
+    if np.isfinite(sim.reward).any():
+        _log_series(rec, "/metrics/reward", sim.frames, ref.fps, sim.reward, "reward", (90, 90, 90, 255))
+
+
+SIM_SERIES = ["/metrics/error", "/metrics/contact/sim", "/metrics/reward"]
+"""Series of the simulation, cleared with ``/sim`` after an early end."""
+
+
+def _log_episode_end(rec: rr.RecordingStream, ref: ReferenceTrack, sim: SimTrack) -> None:
+    """When the simulation ended before the clip: at the next frame, clear ``/sim`` and its series and mark where
+    (and why) the episode ended with a labelled point at its last root position (``/episode/end``)."""
+    last = int(sim.frames[-1])
+    if last >= ref.num_frames - 1:
+        return
+    rec.set_time("frame", sequence=last + 1)
+    rec.set_time("time", duration=(last + 1) / float(ref.fps))
+    rec.log("/sim", rr.Clear(recursive=True))
+    for path in SIM_SERIES:
+        rec.log(path, rr.Clear(recursive=True))
+    label = f"episode ended at frame {last}: {sim.end_reason}"
+    marker = rr.Points3D(
+        [sim.body_pos[-1, 0]], radii=[0.05], colors=[PALETTE.episode_end], labels=[label], show_labels=True
+    )
+    rec.log("/episode/end", marker)
+    rec.reset_time()
+
+
+PLAUSIBILITY_NAMES = {
+    "hand_object_depth_m": "hand pen",
+    "body_floor_depth_m": "floor pen",
+    "object_support_depth_m": "supp pen",
+    "hand_gap_m": "hand gap",
+    "foot_height_m": "foot z",
+    "foot_skate_speed_m_s": "skate",
+    "object_float": "floating",
+    "body_jerk_m_s3": "body jerk",
+    "object_jerk_m_s3": "obj jerk",
+}
+"""Legend names of :func:`wristmimic.plausibility.plausibility_series`' metrics (the path keeps the full name)."""
+
+
+def _log_plausibility(
+    rec: rr.RecordingStream, ref: ReferenceTrack, sim: SimTrack | None, series: dict[str, dict[str, np.ndarray]]
+) -> None:
+    """``/metrics/plausibility/<metric>/<src>``: reference (orange) and simulation (blue) per frame."""
+    colors = {"ref": PALETTE.ref_body, "sim": PALETTE.sim_body}
+    start = 0 if sim is None else int(sim.frames[0])
+    for src, metrics in series.items():
+        for metric, values in metrics.items():
+            frames = np.arange(len(values)) + (start if src == "sim" else 0)
+            name = f"{PLAUSIBILITY_NAMES.get(metric, metric)} {src}"
+            path = f"/metrics/plausibility/{metric}/{src}"
+            _log_series(rec, path, frames, ref.fps, values, name, colors.get(src, PALETTE.unknown))
 
 
 def _log_events(rec: rr.RecordingStream, ref: ReferenceTrack, window: WindowConfig, sim: SimTrack | None) -> None:
