@@ -69,8 +69,8 @@ class RewardInputs:
     """(N, K, P) squared distances ig_pos -> points if already computed (the environment shares them with its
     nearest-point query); None: computed here."""
     ref_ig_weights: torch.Tensor | None = None
-    """(N, K, P) the reference's normalised interaction-graph weights w2 / sum(w2) if precomputed per frame;
-    None: computed here from ref_ig_pos and ref_points."""
+    """(N, K, P) the reference's normalised interaction-graph weights :func:`ig_weights` if precomputed per
+    frame; None: computed here from ref_ig_pos and ref_points."""
 
 
 # --- helpers -------------------------------------------------------------------------------------------------
@@ -127,22 +127,22 @@ def body_errors(x: RewardInputs) -> tuple[torch.Tensor, torch.Tensor, torch.Tens
 def error_pos(sq: torch.Tensor, w_near: torch.Tensor, idx: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
     """E_p = sum_j m_j w_near,j |p_ref - p|^2 / max(sum_j m_j, 1) over bodies idx (position near the object);
     ``sq`` and ``w_near`` (N, B) from :func:`body_errors` and :func:`near_weight`."""
-    return _weighted_mean(w_near[:, idx] * sq[:, idx], m)
+    return _weighted_mean(w_near.index_select(1, idx) * sq.index_select(1, idx), m)
 
 
 def error_rot(ang: torch.Tensor, w_near: torch.Tensor, idx: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
     """E_r = sum_j m_j (1 - w_near,j) angle(q_ref, q) / max(sum_j m_j, 1) over bodies idx (rotation far)."""
-    return _weighted_mean((1.0 - w_near[:, idx]) * ang[:, idx], m)
+    return _weighted_mean((1.0 - w_near.index_select(1, idx)) * ang.index_select(1, idx), m)
 
 
 def error_wrist_pos(sq: torch.Tensor, sets: BodySets) -> torch.Tensor:
     """E_wp = mean over both wrists of |p_ref - p|^2 (unweighted)."""
-    return sq[:, sets.wrists].mean(-1)
+    return sq.index_select(1, sets.wrists).mean(-1)
 
 
 def error_wrist_rot(ang: torch.Tensor, sets: BodySets) -> torch.Tensor:
     """E_wr = mean over both wrists of angle(q_ref, q) (rad)."""
-    return ang[:, sets.wrists].mean(-1)
+    return ang.index_select(1, sets.wrists).mean(-1)
 
 
 def error_root_pos(sq: torch.Tensor) -> torch.Tensor:
@@ -181,19 +181,22 @@ def ig_weights(sq: torch.Tensor, min_sq: float = CONSTANTS.ig_min_sq_dist) -> to
 def error_ig(x: RewardInputs, min_sq: float = CONSTANTS.ig_min_sq_dist) -> torch.Tensor:
     """E_ig = 0.5 sum_kp |ig - ig_ref|^2 (w1 + w2), w = 1/max(|ig|^2, min_sq) normalised over all pairs.
 
-    With ig_kp = x_k - p_p: ig - ig_ref = a_k - b_p with a = x - x_ref, b = p - p_ref, so
-    sum_kp w_kp |a_k - b_p|^2 = sum_k |a_k|^2 sum_p w_kp + sum_p |b_p|^2 sum_k w_kp - 2 sum_k a_k . (w b)_k:
-    one batched matmul on the (N, K, P) weights (InterMimic's dense all-pairs graph).
+    With ig_kp = x_k - p_p: ig - ig_ref = a_k - b_p with a = x - x_ref, b = p - p_ref, and
+    |a_k - b_p|^2 = |a_k|^2 + |b_p|^2 - 2 a_k . b_p, so one batched matmul of w = w1 + w2 with [b, 1, |b|^2]
+    gives every sum over p ((w b)_k, the row sums, (w |b|^2)_k): the (N, K, P) weights are read once
+    (InterMimic's dense all-pairs graph).
     """
     if x.points.shape[1] == 0:
         return torch.zeros(x.body_pos.shape[0], dtype=x.body_pos.dtype, device=x.body_pos.device)
     sq = sq_dists(x.ig_pos, x.points) if x.ig_sq_dists is None else x.ig_sq_dists
     w2 = ig_weights(sq_dists(x.ref_ig_pos, x.ref_points), min_sq) if x.ref_ig_weights is None else x.ref_ig_weights
-    w = ig_weights(sq, min_sq).add_(w2)
+    w = sq.clamp_min(min_sq).reciprocal_()
+    w = torch.addcmul(w2, w, w.sum((1, 2), keepdim=True).reciprocal_(), out=w)  # w1 / sum(w1) + w2
     a, b = x.ig_pos - x.ref_ig_pos, x.points - x.ref_points
-    e = (w.sum(2) * a.square().sum(-1)).sum(1) + (w.sum(1) * b.square().sum(-1)).sum(1)
-    e = e - 2.0 * (torch.bmm(w, b) * a).sum((1, 2))
-    return 0.5 * e
+    b_sq = b.square().sum(-1)[:, None]
+    g = torch.bmm(torch.cat([b.transpose(1, 2), torch.ones_like(b_sq), b_sq], 1), w.transpose(1, 2))  # (N, 5, K)
+    e = a.square().sum(-1) * g[:, 3] + g[:, 4] - 2.0 * (a.transpose(1, 2) * g[:, :3]).sum(1)
+    return 0.5 * e.sum(1)
 
 
 def error_contact_hand(x: RewardInputs) -> torch.Tensor:
@@ -203,9 +206,9 @@ def error_contact_hand(x: RewardInputs) -> torch.Tensor:
 
 def error_contact_other(x: RewardInputs, sets: BodySets) -> torch.Tensor:
     """E = sum mask |c_sim - c_ref| / max(sum mask, 1) over contact_other; target 1 at label 1, 0 at -1, 0 ignored."""
-    labels = x.ref_labels[:, sets.contact_other]
+    labels = x.ref_labels.index_select(1, sets.contact_other)
     mask = (labels != 0).to(x.body_pos.dtype)
-    diff = (x.contact_obj[:, sets.contact_other] != (labels > 0)).to(x.body_pos.dtype)
+    diff = (x.contact_obj.index_select(1, sets.contact_other) != (labels > 0)).to(x.body_pos.dtype)
     return _weighted_mean(diff, mask)
 
 
