@@ -66,11 +66,12 @@ class GoalRef:
 
 def point_sq_dists(pos: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
     """(N, M, 3) positions, (N, P, 3) points -> (N, M, P) squared distances, one batched matmul of
-    [x, |x|^2, 1] . [-2p, 1, |p|^2] (clamped at 0); never materialises (N, M, P, 3)."""
+    [x, |x|^2, 1] . [-2p, 1, |p|^2]; never materialises (N, M, P, 3). Not clamped: a pair closer than the
+    float32 rounding of |x|^2 + |p|^2 may come out slightly negative (users clamp, e.g. the IG weights)."""
     one_a, one_b = pos.new_ones(*pos.shape[:-1], 1), points.new_ones(*points.shape[:-1], 1)
     a = torch.cat([pos, pos.square().sum(-1, keepdim=True), one_a], -1)
     b = torch.cat([-2.0 * points, one_b, points.square().sum(-1, keepdim=True)], -1)
-    return torch.bmm(a, b.transpose(1, 2)).clamp_min_(0.0)
+    return torch.bmm(a, b.transpose(1, 2))
 
 
 def nearest_vectors(pos: torch.Tensor, points: torch.Tensor, sq_dists: torch.Tensor | None = None) -> torch.Tensor:
@@ -104,13 +105,15 @@ def observation_parts(
     tracked: torch.Tensor,
     rotated: torch.Tensor,
     contact_bodies: torch.Tensor,
-    state_contact_bodies: torch.Tensor,
-) -> dict[str, torch.Tensor]:
-    """The observation as named pieces (their concatenation in order is the observation vector).
+    state_contact_bodies: torch.Tensor | None,
+) -> dict[str, list[torch.Tensor]]:
+    """The observation as named parts, each a list of (N, w) pieces: the concatenation of every piece in order
+    is the observation vector (one copy).
 
     ``state``: (N, 1 + 3(B-1) + 6B + 3B + 3B + C + 15 O + 3B) root height, body positions relative to the root,
     body orientations (6D), linear and angular velocities, contact markers, object position, orientation and
-    velocities, interaction graph (:func:`ig_feature` of ``near_vec``); C = ``state_contact_bodies``. Per
+    velocities, interaction graph (:func:`ig_feature` of ``near_vec``); C = ``state_contact_bodies`` (None:
+    all B bodies in order). Per
     horizon k, ``goal<k>/<piece>``: dpos 3K, ref_pos 3K, drot 6R, obj_dpos 3O, obj_drot 6O, dig 3K, dcontact C
     (``contact_bodies``), dhand 2.
 
@@ -124,7 +127,7 @@ def observation_parts(
     c, sn = rot[:, 0, 0, None, None], rot[:, 1, 0, None, None]  # cos / sin of the heading
     root = s.body_pos[:, 0]
     # orientations: simulated bodies and objects, then dq = q_ref * conj(q) of every horizon (bodies, objects)
-    q_sim = torch.cat([s.body_quat[:, rotated], s.obj_quat], 1)
+    q_sim = torch.cat([s.body_quat.index_select(1, rotated), s.obj_quat], 1)
     q_ref = torch.cat([goal.body_quat, goal.obj_quat], 2).transpose(0, 1).reshape(N, H * (R + O), 4)
     dq = quat_mul(q_ref, quat_conj(q_sim).repeat(1, H, 1))
     t6 = tan_norm_6d(torch.cat([s.body_quat, s.obj_quat, dq], 1))
@@ -133,10 +136,10 @@ def observation_parts(
     d0, d1 = d[..., :3], d[..., 3:]
     drot = torch.cat([c * d0 + sn * d1, c * d1 - sn * d0], -1).view(N, H, R + O, 6)
     ig = ig_feature(near_vec)
-    dpos = goal.body_pos - s.body_pos[:, tracked]  # (H, N, K, 3)
+    dpos = goal.body_pos - s.body_pos.index_select(1, tracked)  # (H, N, K, 3)
     ref_pos = goal.body_pos - root[:, None]
     obj_dpos = goal.obj_pos - s.obj_pos
-    dig = goal.ig - ig[:, tracked]
+    dig = goal.ig - ig.index_select(1, tracked)
     vec = [
         s.body_pos[:, 1:] - root[:, None],  # B-1
         t6[:, :B].reshape(N, 2 * B, 3),  # 2B
@@ -160,16 +163,16 @@ def observation_parts(
     y = torch.bmm(torch.cat(vec, 1), rot).flatten(1)  # every vector in the heading frame
     a = 3 * (B - 1 + 2 * B + 2 * B)  # positions, orientations, velocities of the bodies
     b = a + 3 * (O + 2 * O + 2 * O + B)  # objects and the interaction graph
-    contact = s.contact[:, state_contact_bodies].to(y.dtype)
-    parts = {"state": torch.cat([root[:, 2:3], y[:, :a], contact, y[:, a:b]], 1)}
+    contact = s.contact if state_contact_bodies is None else s.contact.index_select(1, state_contact_bodies)
+    parts = {"state": [root[:, 2:3], y[:, :a], contact.to(y.dtype), y[:, a:b]]}
     label = goal.labels
-    dcontact = label * ((label + 1) / 2 - s.contact_obj[:, contact_bodies].to(y.dtype))  # (H, N, C)
+    dcontact = label * ((label + 1) / 2 - s.contact_obj.index_select(1, contact_bodies).to(y.dtype))  # (H, N, C)
     dhand = goal.hand - sim_hand.to(y.dtype)
     widths = {"dpos": 3 * K, "ref_pos": 3 * K, "drot": 6 * R, "obj_dpos": 3 * O, "obj_drot": 6 * O, "dig": 3 * K}
     for h, k in enumerate(horizons):
         for name, w in widths.items():
-            parts[f"goal{k}/{name}"] = y[:, b : b + w]
+            parts[f"goal{k}/{name}"] = [y[:, b : b + w]]
             b += w
-        parts[f"goal{k}/dcontact"] = dcontact[h]
-        parts[f"goal{k}/dhand"] = dhand[h]
+        parts[f"goal{k}/dcontact"] = [dcontact[h]]
+        parts[f"goal{k}/dhand"] = [dhand[h]]
     return parts

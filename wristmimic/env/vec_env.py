@@ -218,7 +218,7 @@ class WristMimicEnv:
         self._sd_shapes = {k: v.shape for k, v in self._idx.__dict__.items()}
         hinge = self._hinge_dof.cpu().numpy()
         self._hinge_slice = (
-            slice(int(hinge[0]), int(hinge[-1]) + 1) if len(hinge) and np.array_equal(np.diff(hinge), 1) else None
+            slice(int(hinge[0]), int(hinge[-1]) + 1) if len(hinge) and bool((np.diff(hinge) == 1).all()) else None
         )
         # surface points as (O, Pmax, 3) blocks in their objects' frames; keep: the rows of the P points
         owner, O = r.points_object.cpu(), len(self.scene.dynamic_objects)
@@ -235,7 +235,11 @@ class WristMimicEnv:
         # hands as one (2, L) index (the shorter list padded with its own first body: 'any' is unchanged)
         L = max(len(h) for h in self.hands)
         self._hand_idx = torch.stack([torch.cat([h, h[:1].expand(L - len(h))]) for h in self.hands])
-        self._t_c = torch.full((N,), r.t_c, dtype=torch.long, device=dev)
+        # window phase of every frame in [lo, hi]: all frames below lo and above hi are outside the window
+        wc = self.cfg.window
+        self._phase_lo = min(0, r.t_c - wc.t_b - 1)
+        frames = torch.arange(self._phase_lo, max(T, r.t_c + wc.t_a + 1) + 1, device=dev)
+        self._phase_table = W.phase(frames, torch.full_like(frames, r.t_c), wc)
         self._grasp = r.grasp_hands[None].expand(N, 2)
         # goal observation: the reference at a frame, tracked / rotated / contact bodies, one row per frame
         gc = self.goal_contact
@@ -253,8 +257,13 @@ class WristMimicEnv:
         self._horizons = torch.as_tensor(self.cfg.goal_horizons, dtype=torch.long, device=dev)
         # reference state (qpos, qvel) of every frame
         self._ref_qpos, self._ref_qvel = self._reference_state_table()
-        # normalised reference interaction-graph weights per frame, (T, K, P), if that table is not too large
-        key, P = self.sets.key, r.points.shape[1]
+        # bodies -> points distances are computed with the key bodies first: the IG reward reads (N, K, P) as a view
+        key, P, B = self.sets.key, r.points.shape[1], self.scene.skeleton.num_bodies
+        rest = torch.ones(B, dtype=torch.bool, device=dev)
+        rest[key] = False
+        self._sq_rows = torch.cat([key, torch.arange(B, device=dev)[rest]])
+        self._sq_unperm = torch.argsort(self._sq_rows)
+        # reference interaction-graph weights of every frame, (T, K, P), if that table is not too large
         self._ref_ig_w: torch.Tensor | None = None
         if P and T * len(key) * P <= _IG_TABLE_MAX:
             rows_t = [
@@ -390,17 +399,18 @@ class WristMimicEnv:
         )
 
     def ref_frame(self, frames: torch.Tensor) -> RefFrame:
+        """The reference at ``frames`` (N,), clamped to the sequence."""
         r = self.ref
         f = frames.clamp(0, r.num_frames - 1)
         return RefFrame(
-            r.body_pos[f],
-            r.body_quat[f],
-            r.obj_pos[f],
-            r.obj_quat[f],
-            r.points[f],
-            r.labels[f],
-            r.hand[f],
-            r.near_vec[f],
+            r.body_pos.index_select(0, f),
+            r.body_quat.index_select(0, f),
+            r.obj_pos.index_select(0, f),
+            r.obj_quat.index_select(0, f),
+            r.points.index_select(0, f),
+            r.labels.index_select(0, f),
+            r.hand.index_select(0, f),
+            r.near_vec.index_select(0, f),
         )
 
     # -- observations --------------------------------------------------------------------------------------
@@ -419,15 +429,22 @@ class WristMimicEnv:
             hand=g[6],
         )
 
-    def _point_sq_dists(self, s: SimState) -> torch.Tensor | None:
-        """(N, B, P) squared distances bodies -> object surface points (None without points)."""
-        return point_sq_dists(s.body_pos, s.points) if s.points.shape[1] else None
+    def _point_sq_dists(self, s: SimState, worlds: torch.Tensor | None = None) -> torch.Tensor | None:
+        """(N, B, P) squared distances bodies -> object surface points, rows in the order key bodies first
+        (``_sq_rows``), of every world or of ``worlds`` (n,) only; None without points."""
+        if not s.points.shape[1]:
+            return None
+        pos, pts = s.body_pos, s.points
+        if worlds is not None:
+            pos, pts = pos.index_select(0, worlds), pts.index_select(0, worlds)
+        return point_sq_dists(pos.index_select(1, self._sq_rows), pts)
 
     def _observe(self, s: SimState | None = None, sq: torch.Tensor | None = None) -> torch.Tensor:
         """Observation of every world; ``sq``: :meth:`_point_sq_dists` of ``s`` if already computed."""
         s = s or self.sim_state()
         sq = self._point_sq_dists(s) if sq is None else sq
-        near = nearest_vectors(s.body_pos, s.points, sq)  # one (N, B, P) distance query per state
+        pos = s.body_pos.index_select(1, self._sq_rows)  # the rows of sq
+        near = nearest_vectors(pos, s.points, sq).index_select(1, self._sq_unperm)
         parts = observation_parts(
             s,
             near,
@@ -437,15 +454,16 @@ class WristMimicEnv:
             self.tracked,
             self.rotated,
             self.goal_contact,
-            self.all_bodies,
+            None,  # the state's contact markers: every body
         )
         if not self._obs_layout:
             a = 0
             for name, v in parts.items():
-                self._obs_layout[name] = slice(a, a + v.shape[1])
-                a += v.shape[1]
+                w = sum(p.shape[1] for p in v)
+                self._obs_layout[name] = slice(a, a + w)
+                a += w
             self.observation_size = a
-        return torch.cat(list(parts.values()), dim=1)
+        return torch.cat([p for v in parts.values() for p in v], dim=1)
 
     # -- step ----------------------------------------------------------------------------------------------
     def action_to_ctrl(self, action: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
@@ -505,7 +523,7 @@ class WristMimicEnv:
             s = self.sim_state()
             if sq is not None and self.device.type == "cpu":  # only the reset worlds' distances changed
                 ids = done.nonzero().flatten()
-                sq[ids] = point_sq_dists(s.body_pos[ids], s.points[ids])
+                sq[ids] = self._point_sq_dists(s, ids)
             else:
                 sq = self._point_sq_dists(s)
         return self._observe(s, sq), reward, terminated, truncated, info
@@ -544,7 +562,7 @@ class WristMimicEnv:
         }
 
     def _window(self) -> tuple[torch.Tensor, torch.Tensor]:
-        ph = W.phase(self.frame, self._t_c, self.cfg.window)
+        ph = self._phase_table[(self.frame - self._phase_lo).clamp(0, len(self._phase_table) - 1)]
         return ph != W.OUTSIDE, ph
 
     def _reward(
@@ -559,13 +577,13 @@ class WristMimicEnv:
             body_quat=s.body_quat,
             ref_body_pos=rf.body_pos,
             ref_body_quat=rf.body_quat,
-            ref_near_dist=self.ref.near_dist[f],
+            ref_near_dist=self.ref.near_dist.index_select(0, f),
             obj_pos=s.obj_pos,
             obj_quat=s.obj_quat,
             ref_obj_pos=rf.obj_pos,
             ref_obj_quat=rf.obj_quat,
-            ig_pos=s.body_pos[:, key],
-            ref_ig_pos=rf.body_pos[:, key],
+            ig_pos=s.body_pos.index_select(1, key),
+            ref_ig_pos=rf.body_pos.index_select(1, key),
             points=s.points,
             ref_points=rf.points,
             contact_obj=s.contact_obj,
@@ -581,7 +599,7 @@ class WristMimicEnv:
             grasp_hands=self._grasp,
             step=self.steps,
             dt=self.scene.config.control_dt,
-            ig_sq_dists=None if sq is None else sq.index_select(1, key),
+            ig_sq_dists=None if sq is None else sq[:, : len(key)],
             ref_ig_weights=None if self._ref_ig_w is None else self._ref_ig_w.index_select(0, f),
         )
         return compute_reward(x, self.sets, self.cfg)
@@ -598,10 +616,10 @@ class WristMimicEnv:
             obj_points=s.points,
             ref_obj_points=rf.points,
             contact_lost=lost,
-            wrist_pos=s.body_pos[:, w],
-            ref_wrist_pos=rf.body_pos[:, w],
-            wrist_quat=s.body_quat[:, w],
-            ref_wrist_quat=rf.body_quat[:, w],
+            wrist_pos=s.body_pos.index_select(1, w),
+            ref_wrist_pos=rf.body_pos.index_select(1, w),
+            wrist_quat=s.body_quat.index_select(1, w),
+            ref_wrist_quat=rf.body_quat.index_select(1, w),
             phase=ph,
             grasp_hands=self._grasp,
             step=self.steps,
