@@ -10,12 +10,17 @@ C contact bodies, O dynamic objects).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import torch
 
 from wristmimic.env.torch_math import heading_angle, quat_conj, quat_mul, tan_norm_6d, yaw_matrix
 
-_ID6 = torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0])
+
+@lru_cache(maxsize=8)
+def _id6(device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """6D of the identity rotation on ``device`` (made once: no host-to-device copy per step)."""
+    return torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0], dtype=dtype, device=device)
 
 
 @dataclass
@@ -132,7 +137,7 @@ def observation_parts(
     dq = quat_mul(q_ref, quat_conj(q_sim).repeat(1, H, 1))
     t6 = tan_norm_6d(torch.cat([s.body_quat, s.obj_quat, dq], 1))
     # heading conjugation h dq h^-1: its matrix columns are h (c D0 + s D1) and h (c D1 - s D0), D = R(dq) - I
-    d = t6[:, B + O :] - _ID6.to(t6.device)
+    d = t6[:, B + O :] - _id6(t6.device, t6.dtype)
     d0, d1 = d[..., :3], d[..., 3:]
     drot = torch.cat([c * d0 + sn * d1, c * d1 - sn * d0], -1).view(N, H, R + O, 6)
     ig = ig_feature(near_vec)

@@ -14,6 +14,7 @@ Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface po
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import torch
 
@@ -241,6 +242,15 @@ def reward_contact_hand(err: torch.Tensor, ref_hand: torch.Tensor, lam: float) -
     return f.prod(-1)
 
 
+@lru_cache(maxsize=32)
+def _lambda_rows(
+    lams: tuple[float, ...], lams_window: tuple[float, ...], device: torch.device, dtype: torch.dtype
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(F,) lambdas outside and inside the modulated window, made once per set of weights and device (no
+    host-to-device copy per step)."""
+    return torch.tensor(lams, dtype=dtype, device=device), torch.tensor(lams_window, dtype=dtype, device=device)
+
+
 def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
     """Names of the reward factors present for this config, in product order."""
     names = ["body_pos", "body_rot"]
@@ -299,9 +309,12 @@ def compute_reward(
 
     # every exp(-lambda E) factor in one pass: (N, F) lambdas, the window ones where modulated
     names = list(errors)
-    dev, dt = x.body_pos.device, x.body_pos.dtype
-    lam = torch.tensor([lams[n] for n in names], dtype=dt, device=dev)
-    lam_w = torch.tensor([lams_window.get(n, lams[n]) for n in names], dtype=dt, device=dev)
+    lam, lam_w = _lambda_rows(
+        tuple(lams[n] for n in names),
+        tuple(lams_window.get(n, lams[n]) for n in names),
+        x.body_pos.device,
+        x.body_pos.dtype,
+    )
     lam = torch.where(modulated(x, cfg)[:, None], lam_w, lam)
     f = torch.exp(-lam * torch.stack([errors[n] for n in names], -1))
     factors = {n: f[:, i] for i, n in enumerate(names)}
