@@ -14,6 +14,7 @@ Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface po
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import torch
 
@@ -65,6 +66,12 @@ class RewardInputs:
     grasp_hands: torch.Tensor  # (N, 2) bool: hands with a first contact frame in the sequence
     step: torch.Tensor  # (N,) long: control steps since the episode started
     dt: float  # control period (s)
+    ig_sq_dists: torch.Tensor | None = None
+    """(N, K, P) squared distances ig_pos -> points if already computed (the environment shares them with its
+    nearest-point query); None: computed here."""
+    ref_ig_weights: torch.Tensor | None = None
+    """(N, K, P) the reference's normalised interaction-graph weights :func:`ig_weights` if precomputed per
+    frame; None: computed here from ref_ig_pos and ref_points."""
 
 
 # --- helpers -------------------------------------------------------------------------------------------------
@@ -81,11 +88,6 @@ def _mean(v: torch.Tensor, dims: tuple[int, ...]) -> torch.Tensor:
 def _weighted_mean(e: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
     """(N, J) errors, (N, J) weights -> (N,) sum(m e) / max(sum(m), 1)."""
     return (m * e).sum(-1) / m.sum(-1).clamp_min(1.0)
-
-
-def _exp(lam: torch.Tensor | float, err: torch.Tensor) -> torch.Tensor:
-    """exp(-lambda * E)."""
-    return torch.exp(-lam * err)
 
 
 def near_weight(ref_near_dist: torch.Tensor, w: RewardWeights) -> torch.Tensor:
@@ -114,36 +116,44 @@ def arm_weights(x: RewardInputs, idx: torch.Tensor, sets: BodySets, cfg: EnvConf
 # --- errors --------------------------------------------------------------------------------------------------
 
 
-def error_pos(x: RewardInputs, idx: torch.Tensor, m: torch.Tensor, w: RewardWeights) -> torch.Tensor:
-    """E_p = sum_j m_j w_near,j |p_ref - p|^2 / max(sum_j m_j, 1) over bodies idx (position near the object)."""
-    e = (x.ref_body_pos[:, idx] - x.body_pos[:, idx]).square().sum(-1)
-    return _weighted_mean(near_weight(x.ref_near_dist[:, idx], w) * e, m)
+def body_errors(x: RewardInputs) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Per-body raw errors every body term selects from: (N, B) |p_ref - p|^2, (N, B) angle(q_ref, q) (rad)
+    and (N, O) the objects' angle(q_ref, q), one quaternion pass for bodies and objects together."""
+    sq = (x.ref_body_pos - x.body_pos).square().sum(-1)
+    ang = quat_angle(torch.cat([x.ref_body_quat, x.ref_obj_quat], 1), torch.cat([x.body_quat, x.obj_quat], 1))
+    B = x.body_pos.shape[1]
+    return sq, ang[:, :B], ang[:, B:]
 
 
-def error_rot(x: RewardInputs, idx: torch.Tensor, m: torch.Tensor, w: RewardWeights) -> torch.Tensor:
+def error_pos(sq: torch.Tensor, w_near: torch.Tensor, idx: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
+    """E_p = sum_j m_j w_near,j |p_ref - p|^2 / max(sum_j m_j, 1) over bodies idx (position near the object);
+    ``sq`` and ``w_near`` (N, B) from :func:`body_errors` and :func:`near_weight`."""
+    return _weighted_mean(w_near.index_select(1, idx) * sq.index_select(1, idx), m)
+
+
+def error_rot(ang: torch.Tensor, w_near: torch.Tensor, idx: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
     """E_r = sum_j m_j (1 - w_near,j) angle(q_ref, q) / max(sum_j m_j, 1) over bodies idx (rotation far)."""
-    e = quat_angle(x.ref_body_quat[:, idx], x.body_quat[:, idx])
-    return _weighted_mean((1.0 - near_weight(x.ref_near_dist[:, idx], w)) * e, m)
+    return _weighted_mean((1.0 - w_near.index_select(1, idx)) * ang.index_select(1, idx), m)
 
 
-def error_wrist_pos(x: RewardInputs, sets: BodySets) -> torch.Tensor:
+def error_wrist_pos(sq: torch.Tensor, sets: BodySets) -> torch.Tensor:
     """E_wp = mean over both wrists of |p_ref - p|^2 (unweighted)."""
-    return (x.ref_body_pos[:, sets.wrists] - x.body_pos[:, sets.wrists]).square().sum(-1).mean(-1)
+    return sq.index_select(1, sets.wrists).mean(-1)
 
 
-def error_wrist_rot(x: RewardInputs, sets: BodySets) -> torch.Tensor:
+def error_wrist_rot(ang: torch.Tensor, sets: BodySets) -> torch.Tensor:
     """E_wr = mean over both wrists of angle(q_ref, q) (rad)."""
-    return quat_angle(x.ref_body_quat[:, sets.wrists], x.body_quat[:, sets.wrists]).mean(-1)
+    return ang.index_select(1, sets.wrists).mean(-1)
 
 
-def error_root_pos(x: RewardInputs) -> torch.Tensor:
+def error_root_pos(sq: torch.Tensor) -> torch.Tensor:
     """E_rootp = |p_ref - p|^2 of the root body (m^2)."""
-    return (x.ref_body_pos[:, 0] - x.body_pos[:, 0]).square().sum(-1)
+    return sq[:, 0]
 
 
-def error_root_rot(x: RewardInputs) -> torch.Tensor:
+def error_root_rot(ang: torch.Tensor) -> torch.Tensor:
     """E_rootr = angle(q_ref, q) of the root body (rad)."""
-    return quat_angle(x.ref_body_quat[:, 0], x.body_quat[:, 0])
+    return ang[:, 0]
 
 
 def error_obj_pos(x: RewardInputs) -> torch.Tensor:
@@ -151,9 +161,9 @@ def error_obj_pos(x: RewardInputs) -> torch.Tensor:
     return _mean((x.ref_obj_pos - x.obj_pos).square(), (1, 2))
 
 
-def error_obj_rot(x: RewardInputs) -> torch.Tensor:
-    """E_or = mean over objects of angle(q_ref, q) (rad)."""
-    return _mean(quat_angle(x.ref_obj_quat, x.obj_quat), (1,))
+def error_obj_rot(obj_ang: torch.Tensor) -> torch.Tensor:
+    """E_or = mean over objects of angle(q_ref, q) (rad), from :func:`body_errors`."""
+    return _mean(obj_ang, (1,))
 
 
 def sq_dists(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -162,19 +172,32 @@ def sq_dists(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return d.clamp_min(0.0)
 
 
+def ig_weights(sq: torch.Tensor, min_sq: float = CONSTANTS.ig_min_sq_dist) -> torch.Tensor:
+    """(N, K, P) squared node-point distances -> interaction-graph weights 1 / max(d^2, min_sq), normalised to
+    sum 1 over all pairs of each world."""
+    w = sq.clamp_min(min_sq).reciprocal_()
+    return w.div_(w.sum((1, 2), keepdim=True))
+
+
 def error_ig(x: RewardInputs, min_sq: float = CONSTANTS.ig_min_sq_dist) -> torch.Tensor:
     """E_ig = 0.5 sum_kp |ig - ig_ref|^2 (w1 + w2), w = 1/max(|ig|^2, min_sq) normalised over all pairs.
 
-    With ig_kp = x_k - p_p: ig - ig_ref = (x_k - x_ref_k) - (p_p - p_ref_p), so every term is a pairwise
-    squared distance (N, K, P) computed by one batched matmul each (InterMimic's dense all-pairs graph).
+    With ig_kp = x_k - p_p: ig - ig_ref = a_k - b_p with a = x - x_ref, b = p - p_ref, and
+    |a_k - b_p|^2 = |a_k|^2 + |b_p|^2 - 2 a_k . b_p, so one batched matmul of w = w1 + w2 with [b, 1, |b|^2]
+    gives every sum over p ((w b)_k, the row sums, (w |b|^2)_k): the (N, K, P) weights are read once
+    (InterMimic's dense all-pairs graph).
     """
     if x.points.shape[1] == 0:
         return torch.zeros(x.body_pos.shape[0], dtype=x.body_pos.dtype, device=x.body_pos.device)
-    w1 = 1.0 / sq_dists(x.ig_pos, x.points).clamp_min(min_sq)
-    w2 = 1.0 / sq_dists(x.ref_ig_pos, x.ref_points).clamp_min(min_sq)
-    w = w1 / w1.sum((1, 2), keepdim=True) + w2 / w2.sum((1, 2), keepdim=True)
-    e = sq_dists(x.ig_pos - x.ref_ig_pos, x.points - x.ref_points)
-    return 0.5 * (e * w).sum((1, 2))
+    sq = sq_dists(x.ig_pos, x.points) if x.ig_sq_dists is None else x.ig_sq_dists
+    w2 = ig_weights(sq_dists(x.ref_ig_pos, x.ref_points), min_sq) if x.ref_ig_weights is None else x.ref_ig_weights
+    w = sq.clamp_min(min_sq).reciprocal_()
+    w = torch.addcmul(w2, w, w.sum((1, 2), keepdim=True).reciprocal_(), out=w)  # w1 / sum(w1) + w2
+    a, b = x.ig_pos - x.ref_ig_pos, x.points - x.ref_points
+    b_sq = b.square().sum(-1)[:, None]
+    g = torch.bmm(torch.cat([b.transpose(1, 2), torch.ones_like(b_sq), b_sq], 1), w.transpose(1, 2))  # (N, 5, K)
+    e = a.square().sum(-1) * g[:, 3] + g[:, 4] - 2.0 * (a.transpose(1, 2) * g[:, :3]).sum(1)
+    return 0.5 * e.sum(1)
 
 
 def error_contact_hand(x: RewardInputs) -> torch.Tensor:
@@ -184,9 +207,9 @@ def error_contact_hand(x: RewardInputs) -> torch.Tensor:
 
 def error_contact_other(x: RewardInputs, sets: BodySets) -> torch.Tensor:
     """E = sum mask |c_sim - c_ref| / max(sum mask, 1) over contact_other; target 1 at label 1, 0 at -1, 0 ignored."""
-    labels = x.ref_labels[:, sets.contact_other]
+    labels = x.ref_labels.index_select(1, sets.contact_other)
     mask = (labels != 0).to(x.body_pos.dtype)
-    diff = (x.contact_obj[:, sets.contact_other] != (labels > 0)).to(x.body_pos.dtype)
+    diff = (x.contact_obj.index_select(1, sets.contact_other) != (labels > 0)).to(x.body_pos.dtype)
     return _weighted_mean(diff, mask)
 
 
@@ -219,6 +242,15 @@ def reward_contact_hand(err: torch.Tensor, ref_hand: torch.Tensor, lam: float) -
     return f.prod(-1)
 
 
+@lru_cache(maxsize=32)
+def _lambda_rows(
+    lams: tuple[float, ...], lams_window: tuple[float, ...], device: torch.device, dtype: torch.dtype
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(F,) lambdas outside and inside the modulated window, made once per set of weights and device (no
+    host-to-device copy per step)."""
+    return torch.tensor(lams, dtype=dtype, device=device), torch.tensor(lams_window, dtype=dtype, device=device)
+
+
 def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
     """Names of the reward factors present for this config, in product order."""
     names = ["body_pos", "body_rot"]
@@ -241,30 +273,29 @@ def compute_reward(
     Energy errors are zeroed (factor 1) while step < consts.energy_start_step.
     """
     w = cfg.weights
-    mod = modulated(x, cfg)
     idx = tracked_bodies(sets, cfg)
     m = arm_weights(x, idx, sets, cfg)
+    sq, ang, obj_ang = body_errors(x)
+    near = near_weight(x.ref_near_dist, w)
     errors: dict[str, torch.Tensor] = {
-        "body_pos": error_pos(x, idx, m, w),
-        "body_rot": error_rot(x, idx, m, w),
+        "body_pos": error_pos(sq, near, idx, m),
+        "body_rot": error_rot(ang, near, idx, m),
     }
-    lams: dict[str, torch.Tensor | float] = {
-        "body_pos": torch.where(mod, w.gbp, w.p),
-        "body_rot": torch.where(mod, w.gbr, w.r),
-    }
+    lams: dict[str, float] = {"body_pos": w.p, "body_rot": w.r}
+    lams_window = {"body_pos": w.gbp, "body_rot": w.gbr}  # lambdas that change in the modulated window
     if w.root_pos > 0:
-        errors["root_pos"], lams["root_pos"] = error_root_pos(x), w.root_pos
+        errors["root_pos"], lams["root_pos"] = error_root_pos(sq), w.root_pos
     if w.root_rot > 0:
-        errors["root_rot"], lams["root_rot"] = error_root_rot(x), w.root_rot
+        errors["root_rot"], lams["root_rot"] = error_root_rot(ang), w.root_rot
     if cfg.wrist_terms:
-        errors["wrist_pos"], lams["wrist_pos"] = error_wrist_pos(x, sets), w.gwp
-        errors["wrist_rot"], lams["wrist_rot"] = error_wrist_rot(x, sets), w.gwr
+        errors["wrist_pos"], lams["wrist_pos"] = error_wrist_pos(sq, sets), w.gwp
+        errors["wrist_rot"], lams["wrist_rot"] = error_wrist_rot(ang, sets), w.gwr
     if cfg.finger_targets:
         ones = torch.ones(x.body_pos.shape[0], sets.fingers.numel(), dtype=x.body_pos.dtype, device=m.device)
-        errors["finger_pos"], lams["finger_pos"] = error_pos(x, sets.fingers, ones, w), w.fp
-        errors["finger_rot"], lams["finger_rot"] = error_rot(x, sets.fingers, ones, w), w.fr
+        errors["finger_pos"], lams["finger_pos"] = error_pos(sq, near, sets.fingers, ones), w.fp
+        errors["finger_rot"], lams["finger_rot"] = error_rot(ang, near, sets.fingers, ones), w.fr
     errors["obj_pos"], lams["obj_pos"] = error_obj_pos(x), w.op
-    errors["obj_rot"], lams["obj_rot"] = error_obj_rot(x), w.orot
+    errors["obj_rot"], lams["obj_rot"] = error_obj_rot(obj_ang), w.orot
     errors["ig"], lams["ig"] = error_ig(x, consts.ig_min_sq_dist), w.ig
     errors["contact_other"], lams["contact_other"] = error_contact_other(x, sets), w.cg_other
     active = x.step >= consts.energy_start_step
@@ -274,10 +305,19 @@ def compute_reward(
         ("obj_energy_ang", error_obj_energy_ang, w.eg2),
         ("contact_energy", error_contact_energy, w.eg3),
     ):
-        e = fn(x)
-        errors[name], lams[name] = torch.where(active, e, torch.zeros_like(e)), lam
+        errors[name], lams[name] = torch.where(active, fn(x), 0.0), lam
 
-    factors = {name: _exp(lams[name], e) for name, e in errors.items()}
+    # every exp(-lambda E) factor in one pass: (N, F) lambdas, the window ones where modulated
+    names = list(errors)
+    lam, lam_w = _lambda_rows(
+        tuple(lams[n] for n in names),
+        tuple(lams_window.get(n, lams[n]) for n in names),
+        x.body_pos.device,
+        x.body_pos.dtype,
+    )
+    lam = torch.where(modulated(x, cfg)[:, None], lam_w, lam)
+    f = torch.exp(-lam * torch.stack([errors[n] for n in names], -1))
+    factors = {n: f[:, i] for i, n in enumerate(names)}
     hand_err = error_contact_hand(x)
     factors["contact_hand"] = reward_contact_hand(hand_err, x.ref_hand, w.cg_hand)
     errors["contact_hand"] = hand_err.sum(-1)  # reference-contact hands without simulated contact (0, 1, 2)

@@ -65,7 +65,8 @@ def term_fall(x: TerminationInputs, cfg: EnvConfig) -> torch.Tensor:
 
 def term_body_error(x: TerminationInputs, sets: BodySets, cfg: EnvConfig) -> torch.Tensor:
     """Mean key-body position error (m) above body_error."""
-    err = torch.linalg.vector_norm(x.body_pos[:, sets.key] - x.ref_body_pos[:, sets.key], dim=-1).mean(-1)
+    diff = x.body_pos.index_select(1, sets.key) - x.ref_body_pos.index_select(1, sets.key)
+    err = torch.linalg.vector_norm(diff, dim=-1).mean(-1)
     return err > cfg.termination.body_error
 
 

@@ -77,6 +77,25 @@ def tan_norm_6d(q: torch.Tensor) -> torch.Tensor:
     )
 
 
+def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
+    """(..., 4) wxyz unit quaternions -> (..., 3, 3) rotation matrices (``R @ v`` = :func:`quat_rotate`)."""
+    w, x, y, z = q.unbind(-1)
+    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
+    m = [
+        [1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
+        [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
+        [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)],
+    ]
+    return torch.stack([e for row in m for e in row], dim=-1).unflatten(-1, (3, 3))
+
+
+def yaw_matrix(yaw: torch.Tensor) -> torch.Tensor:
+    """(...,) angles -> (..., 3, 3) rotations about +Z by ``yaw``."""
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    zero, one = torch.zeros_like(c), torch.ones_like(c)
+    return torch.stack([c, -s, zero, s, c, zero, zero, zero, one], dim=-1).unflatten(-1, (3, 3))
+
+
 def quat_to_rotvec(q: torch.Tensor) -> torch.Tensor:
     """(..., 4) wxyz -> (..., 3) rotation vector (axis * angle, angle in [0, pi]); the shorter way round."""
     q = torch.where(q[..., :1] < 0, -q, q)

@@ -24,16 +24,28 @@ import torch
 from wristmimic.env import window as W
 from wristmimic.env.bodies import BodySets
 from wristmimic.env.config import EnvConfig, check_env_config
-from wristmimic.env.observations import RefFrame, SimState, goal_obs, heading_inverse, nearest_vectors, state_obs
+from wristmimic.env.observations import (
+    GoalRef,
+    RefFrame,
+    SimState,
+    ig_feature,
+    nearest_vectors,
+    observation_parts,
+    point_sq_dists,
+)
 from wristmimic.env.reference import Reference, load_reference
-from wristmimic.env.rewards import RewardInputs, compute_reward
+from wristmimic.env.rewards import CONSTANTS as REWARD_CONSTANTS
+from wristmimic.env.rewards import RewardInputs, compute_reward, ig_weights, sq_dists
 from wristmimic.env.starts import AdaptiveStarts
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
-from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_rotate, quat_to_rotvec
+from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_to_matrix, quat_to_rotvec
 from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
 from wristmimic.sim.backend import PhysicsBackend, make_backend
+
+_IG_TABLE_MAX = 1 << 24
+"""Most elements of the per-frame reference IG weight table (T, K, P) kept in memory (64 MiB float32)."""
 
 
 @dataclass
@@ -50,6 +62,18 @@ class _SensorIndex:
     obj_angvel: np.ndarray
     contact: np.ndarray  # (B, 4) found, fx, fy, fz
     touch: np.ndarray  # (B, O)
+
+
+def _strided(cols: np.ndarray) -> tuple[int, int, int] | None:
+    """(start, row stride, column stride) when the (R, C) column indices are start + r rs + c cs, else None."""
+    if cols.size == 0:
+        return None
+    r, c = cols.shape
+    start = int(cols[0, 0])
+    rs = int(cols[1, 0]) - start if r > 1 else 0
+    cs = int(cols[0, 1]) - start if c > 1 else 1
+    regular = np.array_equal(cols, start + rs * np.arange(r)[:, None] + cs * np.arange(c)[None])
+    return (start, rs, cs) if regular and rs >= 0 and cs > 0 else None
 
 
 def _sensor_index(scene: Scene) -> _SensorIndex:
@@ -188,6 +212,71 @@ class WristMimicEnv:
         ``wristmimic.evaluate.export``); ``steps`` is then the frame reached, ``_ctrl`` the PD targets applied."""
         self._obs_layout: dict[str, slice] = {}
         self.observation_size = 0
+        self._setup_step_constants()
+
+    def _setup_step_constants(self) -> None:
+        """Tables and index tensors the step reads every call, made once: sensordata views, the objects'
+        surface points by object, per-frame reference tables (goal observation, reference state, IG weights)."""
+        dev, r, N, T = self.device, self.ref, self.num_worlds, self.ref.num_frames
+        self._sd_views = {k: _strided(v) for k, v in self._idx.__dict__.items()}
+        self._sd_shapes = {k: v.shape for k, v in self._idx.__dict__.items()}
+        hinge = self._hinge_dof.cpu().numpy()
+        self._hinge_slice = (
+            slice(int(hinge[0]), int(hinge[-1]) + 1) if len(hinge) and bool((np.diff(hinge) == 1).all()) else None
+        )
+        # surface points as (O, Pmax, 3) blocks in their objects' frames; keep: the rows of the P points
+        owner, O = r.points_object.cpu(), len(self.scene.dynamic_objects)
+        counts = torch.bincount(owner, minlength=O) if len(owner) else torch.zeros(O, dtype=torch.long)
+        pmax = int(counts.max()) if O else 0
+        order = torch.argsort(owner, stable=True)
+        rank = torch.empty_like(owner)
+        rank[order] = torch.arange(len(owner)) - (torch.cumsum(counts, 0) - counts)[owner[order]]
+        rows = owner * pmax + rank
+        local = torch.zeros(O * pmax, 3)
+        local[rows] = r.points_local.cpu()
+        self._pts_local = local.view(O, pmax, 3).to(dev)
+        self._pts_rows = None if torch.equal(rows, torch.arange(O * pmax)) else rows.to(dev)
+        # hands as one (2, L) index (the shorter list padded with its own first body: 'any' is unchanged)
+        L = max(len(h) for h in self.hands)
+        self._hand_idx = torch.stack([torch.cat([h, h[:1].expand(L - len(h))]) for h in self.hands])
+        # window phase of every frame in [lo, hi]: all frames below lo and above hi are outside the window
+        wc = self.cfg.window
+        self._phase_lo = min(0, r.t_c - wc.t_b - 1)
+        frames = torch.arange(self._phase_lo, max(T, r.t_c + wc.t_a + 1) + 1, device=dev)
+        self._phase_table = W.phase(frames, torch.full_like(frames, r.t_c), wc)
+        self._grasp = r.grasp_hands[None].expand(N, 2)
+        # goal observation: the reference at a frame, tracked / rotated / contact bodies, one row per frame
+        gc = self.goal_contact
+        goal = [
+            r.body_pos[:, self.tracked].flatten(1),
+            r.body_quat[:, self.rotated].flatten(1),
+            r.obj_pos.flatten(1),
+            r.obj_quat.flatten(1),
+            ig_feature(r.near_vec[:, self.tracked]).flatten(1),
+            r.labels[:, gc].to(torch.float32),
+            r.hand.to(torch.float32),
+        ]
+        self._goal_table = torch.cat(goal, 1)
+        self._goal_widths = [g.shape[1] for g in goal]
+        self._horizons = torch.as_tensor(self.cfg.goal_horizons, dtype=torch.long, device=dev)
+        # reference state (qpos, qvel) of every frame
+        self._ref_qpos, self._ref_qvel = self._reference_state_table()
+        # bodies -> points distances are computed with the key bodies first: the IG reward reads (N, K, P) as a view
+        key, P, B = self.sets.key, r.points.shape[1], self.scene.skeleton.num_bodies
+        rest = torch.ones(B, dtype=torch.bool, device=dev)
+        rest[key] = False
+        self._sq_rows = torch.cat([key, torch.arange(B, device=dev)[rest]])
+        self._sq_unperm = torch.argsort(self._sq_rows)
+        # reference interaction-graph weights of every frame, (T, K, P), if that table is not too large
+        self._ref_ig_w: torch.Tensor | None = None
+        if P and T * len(key) * P <= _IG_TABLE_MAX:
+            rows_t = [
+                ig_weights(
+                    sq_dists(r.body_pos[a : a + 256, key], r.points[a : a + 256]), REWARD_CONSTANTS.ig_min_sq_dist
+                )
+                for a in range(0, T, 256)
+            ]
+            self._ref_ig_w = torch.cat(rows_t)
 
     # -- construction --------------------------------------------------------------------------------------
     @classmethod
@@ -237,22 +326,26 @@ class WristMimicEnv:
         zero = torch.rand(n, generator=self._gen, device=self.device) < self.cfg.reset_frame0_prob
         return torch.where(zero, torch.zeros_like(uniform), uniform)
 
+    def _reference_state_table(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(T, nq), (T, nv) float64: the reference state of every frame (humanoid and dynamic objects)."""
+        r, T, nv = self.ref, self.ref.num_frames, self.scene.model.nv
+        qpos = self._qpos0.expand(T, -1).clone()
+        qvel = torch.zeros(T, nv, dtype=torch.float64, device=self.device)
+        qpos[:, 0:3], qpos[:, 3:7] = r.root_pos.double(), r.root_quat.double()
+        qpos[:, self._hinge_qpos] = r.joint_angles.double()
+        qvel[:, 0:3], qvel[:, 3:6] = r.root_linvel.double(), r.root_angvel_local.double()
+        qvel[:, self._hinge_dof] = r.joint_vel.double()
+        if len(self._obj_qpos):
+            qpos[:, self._obj_pos_q.flatten()] = r.obj_pos.double().flatten(1)
+            qpos[:, self._obj_quat_q.flatten()] = r.obj_quat.double().flatten(1)
+            qvel[:, self._obj_lin_v.flatten()] = r.obj_linvel.double().flatten(1)
+            qvel[:, self._obj_ang_v.flatten()] = r.obj_angvel_local.double().flatten(1)
+        return qpos, qvel
+
     def reference_state(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(qpos, qvel) float64 of the reference at ``frames`` (N,): humanoid and dynamic objects."""
-        r, f = self.ref, frames.to(torch.long)
-        n, nv = len(f), self.scene.model.nv
-        qpos = self._qpos0.expand(n, -1).clone()
-        qvel = torch.zeros(n, nv, dtype=torch.float64, device=self.device)
-        qpos[:, 0:3], qpos[:, 3:7] = r.root_pos[f].double(), r.root_quat[f].double()
-        qpos[:, self._hinge_qpos] = r.joint_angles[f].double()
-        qvel[:, 0:3], qvel[:, 3:6] = r.root_linvel[f].double(), r.root_angvel_local[f].double()
-        qvel[:, self._hinge_dof] = r.joint_vel[f].double()
-        if len(self._obj_qpos):
-            qpos[:, self._obj_pos_q.flatten()] = r.obj_pos[f].double().flatten(1)
-            qpos[:, self._obj_quat_q.flatten()] = r.obj_quat[f].double().flatten(1)
-            qvel[:, self._obj_lin_v.flatten()] = r.obj_linvel[f].double().flatten(1)
-            qvel[:, self._obj_ang_v.flatten()] = r.obj_angvel_local[f].double().flatten(1)
-        return qpos, qvel
+        f = frames.to(torch.long)
+        return self._ref_qpos[f], self._ref_qvel[f]
 
     def _reset_worlds(self, mask: torch.Tensor, frames: torch.Tensor | None = None) -> None:
         """Reference state initialisation of the worlds where ``mask`` (N,) is true, at ``frames`` (N,) or
@@ -270,71 +363,111 @@ class WristMimicEnv:
         self._prev_obj_vel = torch.where(col[..., None], obj_vel, self._prev_obj_vel)
 
     # -- state ---------------------------------------------------------------------------------------------
+    def _sensors(self, sd: torch.Tensor, name: str) -> torch.Tensor:
+        """(N, R, C) columns ``name`` of float32 sensordata ``sd``: a strided view where they are regular."""
+        spec, (rows, cols) = self._sd_views[name], self._sd_shapes[name]
+        if spec is None:
+            return sd[:, self._tidx[name]]
+        start, rs, cs = spec
+        return sd.as_strided((sd.shape[0], rows, cols), (sd.stride(0), rs, cs), sd.storage_offset() + start)
+
     def sim_state(self) -> SimState:
-        """The simulated state of every world, from the backend's sensors."""
-        sd = self.backend.sensordata.to(torch.float32)  # one conversion (float64 on CPU), then gathers
-        i = self._tidx
-        contact = sd[:, i["contact"]]
+        """The simulated state of every world, from the backend's sensors (a fresh copy: later steps do not
+        change it)."""
+        sd = self.backend.sensordata  # one float32 copy, then views into it
+        sd = sd.to(torch.float32, memory_format=torch.contiguous_format, copy=True)
+        contact = self._sensors(sd, "contact")
         force = contact[..., 1:]
-        obj_pos, obj_quat = sd[:, i["obj_pos"]], sd[:, i["obj_quat"]]
-        r = self.ref
-        points = quat_rotate(obj_quat[:, r.points_object], r.points_local) + obj_pos[:, r.points_object]
-        qvel = self.backend.qvel[:, self._hinge_dof].to(torch.float32)
+        obj_pos, obj_quat = self._sensors(sd, "obj_pos"), self._sensors(sd, "obj_quat")
+        # surface points: each object's rotation matrix applied to its block of local points
+        pts = torch.matmul(self._pts_local, quat_to_matrix(obj_quat).transpose(-1, -2)) + obj_pos[:, :, None]
+        pts = pts.flatten(1, 2)
+        points = pts if self._pts_rows is None else pts.index_select(1, self._pts_rows)
+        qvel = self.backend.qvel
+        qvel = qvel[:, self._hinge_slice] if self._hinge_slice is not None else qvel[:, self._hinge_dof]
         return SimState(
-            body_pos=sd[:, i["body_pos"]],
-            body_quat=sd[:, i["body_quat"]],
-            body_linvel=sd[:, i["body_linvel"]],
-            body_angvel=sd[:, i["body_angvel"]],
+            body_pos=self._sensors(sd, "body_pos"),
+            body_quat=self._sensors(sd, "body_quat"),
+            body_linvel=self._sensors(sd, "body_linvel"),
+            body_angvel=self._sensors(sd, "body_angvel"),
             obj_pos=obj_pos,
             obj_quat=obj_quat,
-            obj_linvel=sd[:, i["obj_linvel"]],
-            obj_angvel=sd[:, i["obj_angvel"]],
-            contact=(contact[..., 0] > 0) & (force.norm(dim=-1) > self.cfg.contact_force_threshold),
+            obj_linvel=self._sensors(sd, "obj_linvel"),
+            obj_angvel=self._sensors(sd, "obj_angvel"),
+            contact=(contact[..., 0] > 0)
+            & (torch.linalg.vector_norm(force, dim=-1) > self.cfg.contact_force_threshold),
             contact_force=force,
-            contact_obj=(sd[:, i["touch"]] > 0).any(-1),
-            joint_vel=qvel,
+            contact_obj=(self._sensors(sd, "touch") > 0).any(-1),
+            joint_vel=qvel.to(torch.float32, copy=True),
             points=points,
         )
 
     def ref_frame(self, frames: torch.Tensor) -> RefFrame:
+        """The reference at ``frames`` (N,), clamped to the sequence."""
         r = self.ref
         f = frames.clamp(0, r.num_frames - 1)
         return RefFrame(
-            r.body_pos[f],
-            r.body_quat[f],
-            r.obj_pos[f],
-            r.obj_quat[f],
-            r.points[f],
-            r.labels[f],
-            r.hand[f],
-            r.near_vec[f],
+            r.body_pos.index_select(0, f),
+            r.body_quat.index_select(0, f),
+            r.obj_pos.index_select(0, f),
+            r.obj_quat.index_select(0, f),
+            r.points.index_select(0, f),
+            r.labels.index_select(0, f),
+            r.hand.index_select(0, f),
+            r.near_vec.index_select(0, f),
         )
 
     # -- observations --------------------------------------------------------------------------------------
-    def _observe(self, s: SimState | None = None) -> torch.Tensor:
+    def _goal_ref(self) -> GoalRef:
+        """The reference at every goal horizon's frame, one gather from the per-frame goal table."""
+        H, N, T = len(self._horizons), self.num_worlds, self.ref.num_frames
+        f = (self.frame[None] + self._horizons[:, None]).clamp(0, T - 1).flatten()
+        g = self._goal_table.index_select(0, f).view(H, N, -1).split(self._goal_widths, -1)
+        return GoalRef(
+            body_pos=g[0].unflatten(-1, (-1, 3)),
+            body_quat=g[1].unflatten(-1, (-1, 4)),
+            obj_pos=g[2].unflatten(-1, (-1, 3)),
+            obj_quat=g[3].unflatten(-1, (-1, 4)),
+            ig=g[4].unflatten(-1, (-1, 3)),
+            labels=g[5],
+            hand=g[6],
+        )
+
+    def _point_sq_dists(self, s: SimState, worlds: torch.Tensor | None = None) -> torch.Tensor | None:
+        """(N, B, P) squared distances bodies -> object surface points, rows in the order key bodies first
+        (``_sq_rows``), of every world or of ``worlds`` (n,) only; None without points."""
+        if not s.points.shape[1]:
+            return None
+        pos, pts = s.body_pos, s.points
+        if worlds is not None:
+            pos, pts = pos.index_select(0, worlds), pts.index_select(0, worlds)
+        return point_sq_dists(pos.index_select(1, self._sq_rows), pts)
+
+    def _observe(self, s: SimState | None = None, sq: torch.Tensor | None = None) -> torch.Tensor:
+        """Observation of every world; ``sq``: :meth:`_point_sq_dists` of ``s`` if already computed."""
         s = s or self.sim_state()
-        inv_h = heading_inverse(s.body_quat[:, 0])
-        near = nearest_vectors(s.body_pos, s.points)  # one (N, B, P) distance query per step
-        parts = {"state": state_obs(s, near, inv_h, self.all_bodies)}
-        for k in self.cfg.goal_horizons:
-            g = goal_obs(
-                s,
-                near,
-                self.ref_frame(self.frame + k),
-                inv_h,
-                self.tracked,
-                self.rotated,
-                self.goal_contact,
-                self.hands,
-            )
-            parts.update({f"goal{k}/{name}": v for name, v in g.items()})
+        sq = self._point_sq_dists(s) if sq is None else sq
+        pos = s.body_pos.index_select(1, self._sq_rows)  # the rows of sq
+        near = nearest_vectors(pos, s.points, sq).index_select(1, self._sq_unperm)
+        parts = observation_parts(
+            s,
+            near,
+            self._sim_hand(s),
+            self._goal_ref(),
+            self.cfg.goal_horizons,
+            self.tracked,
+            self.rotated,
+            self.goal_contact,
+            None,  # the state's contact markers: every body
+        )
         if not self._obs_layout:
             a = 0
             for name, v in parts.items():
-                self._obs_layout[name] = slice(a, a + v.shape[1])
-                a += v.shape[1]
+                w = sum(p.shape[1] for p in v)
+                self._obs_layout[name] = slice(a, a + w)
+                a += w
             self.observation_size = a
-        return torch.cat(list(parts.values()), dim=1)
+        return torch.cat([p for v in parts.values() for p in v], dim=1)
 
     # -- step ----------------------------------------------------------------------------------------------
     def action_to_ctrl(self, action: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
@@ -368,10 +501,11 @@ class WristMimicEnv:
         s = self.sim_state()
         if self.on_step is not None:
             self.on_step(s, action)
+        sq = self._point_sq_dists(s)  # shared by the reward's interaction graph and the observation
         rf = self.ref_frame(self.frame)
         hand = self._sim_hand(s)  # shared by reward, terminations and the evaluation errors
         _, phase = self._window()
-        reward, terms = self._reward(s, rf, hand, phase)
+        reward, terms = self._reward(s, rf, hand, phase, sq)
         terminated, reason = self._terminations(s, rf, hand, phase)
         if self.starts is not None:
             self.starts.record(self.frame, terminated)
@@ -392,8 +526,13 @@ class WristMimicEnv:
         self._prev_obj_vel = torch.cat([s.obj_linvel, s.obj_angvel], -1)
         if self.device.type != "cpu" or bool(done.any()):  # on a GPU: always, masked (no host round trip)
             self._reset_worlds(done)
-            s = None
-        return self._observe(s), reward, terminated, truncated, info
+            s = self.sim_state()
+            if sq is not None and self.device.type == "cpu":  # only the reset worlds' distances changed
+                ids = done.nonzero().flatten()
+                sq[ids] = self._point_sq_dists(s, ids)
+            else:
+                sq = self._point_sq_dists(s)
+        return self._observe(s, sq), reward, terminated, truncated, info
 
     def object_wrench(self) -> torch.Tensor:
         """(N, O, 6) virtual object controller: world force and local torque pulling each dynamic object toward
@@ -412,7 +551,7 @@ class WristMimicEnv:
 
     def _sim_hand(self, s: SimState) -> torch.Tensor:
         """(N, 2) bool: any body of the left / right hand touches a dynamic object."""
-        return torch.stack([s.contact_obj[:, h].any(1) for h in self.hands], 1)
+        return s.contact_obj[:, self._hand_idx].any(-1)
 
     def _eval_errors(self, s: SimState, rf: RefFrame, hand: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-world tracking errors of this step, from the state before any auto-reset (for evaluation):
@@ -429,13 +568,13 @@ class WristMimicEnv:
         }
 
     def _window(self) -> tuple[torch.Tensor, torch.Tensor]:
-        t_c = torch.full((self.num_worlds,), self.ref.t_c, dtype=torch.long, device=self.device)
-        ph = W.phase(self.frame, t_c, self.cfg.window)
+        ph = self._phase_table[(self.frame - self._phase_lo).clamp(0, len(self._phase_table) - 1)]
         return ph != W.OUTSIDE, ph
 
     def _reward(
-        self, s: SimState, rf: RefFrame, sim_hand: torch.Tensor, phase: torch.Tensor
+        self, s: SimState, rf: RefFrame, sim_hand: torch.Tensor, phase: torch.Tensor, sq: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Reward and its terms; ``sq``: :meth:`_point_sq_dists` of ``s`` if already computed."""
         in_window = phase != W.OUTSIDE
         f = self.frame.clamp(0, self.ref.num_frames - 1)
         key = self.sets.key
@@ -444,13 +583,13 @@ class WristMimicEnv:
             body_quat=s.body_quat,
             ref_body_pos=rf.body_pos,
             ref_body_quat=rf.body_quat,
-            ref_near_dist=self.ref.near_dist[f],
+            ref_near_dist=self.ref.near_dist.index_select(0, f),
             obj_pos=s.obj_pos,
             obj_quat=s.obj_quat,
             ref_obj_pos=rf.obj_pos,
             ref_obj_quat=rf.obj_quat,
-            ig_pos=s.body_pos[:, key],
-            ref_ig_pos=rf.body_pos[:, key],
+            ig_pos=s.body_pos.index_select(1, key),
+            ref_ig_pos=rf.body_pos.index_select(1, key),
             points=s.points,
             ref_points=rf.points,
             contact_obj=s.contact_obj,
@@ -463,9 +602,11 @@ class WristMimicEnv:
             prev_obj_vel=self._prev_obj_vel,
             contact_force=s.contact_force,
             in_window=in_window,
-            grasp_hands=self.ref.grasp_hands[None].expand(self.num_worlds, 2),
+            grasp_hands=self._grasp,
             step=self.steps,
             dt=self.scene.config.control_dt,
+            ig_sq_dists=None if sq is None else sq[:, : len(key)],
+            ref_ig_weights=None if self._ref_ig_w is None else self._ref_ig_w.index_select(0, f),
         )
         return compute_reward(x, self.sets, self.cfg)
 
@@ -481,12 +622,12 @@ class WristMimicEnv:
             obj_points=s.points,
             ref_obj_points=rf.points,
             contact_lost=lost,
-            wrist_pos=s.body_pos[:, w],
-            ref_wrist_pos=rf.body_pos[:, w],
-            wrist_quat=s.body_quat[:, w],
-            ref_wrist_quat=rf.body_quat[:, w],
+            wrist_pos=s.body_pos.index_select(1, w),
+            ref_wrist_pos=rf.body_pos.index_select(1, w),
+            wrist_quat=s.body_quat.index_select(1, w),
+            ref_wrist_quat=rf.body_quat.index_select(1, w),
             phase=ph,
-            grasp_hands=self.ref.grasp_hands[None].expand(self.num_worlds, 2),
+            grasp_hands=self._grasp,
             step=self.steps,
         )
         return check_terminations(x, self.sets, self.cfg)
