@@ -194,3 +194,30 @@ def test_ctrl_c_in_the_middle_of_an_hdf5_string_write_is_a_clean_interrupt(tmp_p
     )
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip() == "{'interrupted': 40}", r.stdout + r.stderr[-2000:]
+
+
+def test_ctrl_c_right_after_the_temporary_file_is_made_leaves_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The fault suite sends Ctrl-C as soon as the temporary output appears: a SIGINT between its creation and
+    the code that guards it must still remove it."""
+    import os
+    import signal
+
+    from wristmimic import safe_io
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        pytest.skip("SIGINT is not handled by Python's default handler in this process")
+    real_close = os.close
+
+    def close_then_ctrl_c(fd: int) -> None:
+        real_close(fd)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(safe_io.os, "close", close_then_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        DatasetWriter(
+            tmp_path / "o.h5", source_dataset="x", source_format="y", converter="z", input_sha256={}
+        ).__enter__()
+    monkeypatch.undo()
+    assert list(tmp_path.iterdir()) == []

@@ -196,20 +196,26 @@ def atomic_output(path: str | Path, suffix: str = "") -> Iterator[Path]:
     if not parent.is_dir():
         raise InputError(path, None, f"output folder {parent} does not exist")
     remove_stale_temporaries(path)
+    tmp_path: Path | None = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=suffix + ".tmp", dir=parent)
-    except OSError as exc:
-        if exc.errno in _WRITE_ERRNOS and exc.errno != errno.EROFS:  # no space (or inodes) left, I/O error
-            raise OutputError.from_os(path, exc) from None
-        raise InputError(path, None, f"output folder is not writable ({exc.strerror})") from None
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
+        with defer_sigint():  # a Ctrl-C between creating the temporary and guarding it would leave it behind
+            try:
+                fd, tmp = tempfile.mkstemp(
+                    prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=suffix + ".tmp", dir=parent
+                )
+            except OSError as exc:
+                if exc.errno in _WRITE_ERRNOS and exc.errno != errno.EROFS:  # no space (or inodes) left, I/O error
+                    raise OutputError.from_os(path, exc) from None
+                raise InputError(path, None, f"output folder is not writable ({exc.strerror})") from None
+            tmp_path = Path(tmp)
+            os.close(fd)
         yield tmp_path
         _fsync(tmp_path)  # the data is on disk before the name points at it (no empty file after a power cut)
         os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp_path, path)
     except BaseException as exc:
+        if tmp_path is None:
+            raise
         with contextlib.suppress(OSError):
             tmp_path.unlink()
         if isinstance(exc, OSError) and is_write_failure(exc, tmp_path, path):

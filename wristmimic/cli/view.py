@@ -45,6 +45,7 @@ def view_cmd(
     Example: wristmimic view sim.h5 --sequence sub2_largetable_000__sim_mean -o sim.rrd
     """
     from wristmimic.format.reader import open_dataset
+    from wristmimic.format.validate import check_sequence
     from wristmimic.safe_io import check_output_file
     from wristmimic.view.exported import export_provenance, record_export
     from wristmimic.view.record import record_reference
@@ -60,7 +61,9 @@ def view_cmd(
             exported = False
             if sequence is not None:
                 with open_dataset(source) as ds:
-                    exported = sequence in ds.sequence_ids and export_provenance(ds, sequence) is not None
+                    if sequence in ds.sequence_ids:
+                        check_sequence(ds, sequence)  # the data gate before anything reads the sequence
+                        exported = export_provenance(ds, sequence) is not None
             run_only = {
                 "--reference-only": reference_only,
                 "--trial-seed": trial_seed is not None,

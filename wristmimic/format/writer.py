@@ -171,9 +171,10 @@ class DatasetWriter:
 
     def __enter__(self) -> DatasetWriter:
         self._ctx = atomic_output(self.path)
-        tmp = self._ctx.__enter__()
+        tmp: Path | None = None
         try:
-            with defer_sigint():
+            with defer_sigint():  # Ctrl-C is raised inside this try, once the temporary file is guarded
+                tmp = self._ctx.__enter__()
                 self._sink = GuardedFile(tmp)
                 self._f = h5py.File(self._sink, "w")
                 for k, v in {
@@ -185,6 +186,8 @@ class DatasetWriter:
                     self._f.create_group(g)
             self.check()
         except BaseException as exc:
+            if tmp is None:  # no temporary file was made (or atomic_output removed it)
+                raise
             self._abort(exc)
         return self
 
