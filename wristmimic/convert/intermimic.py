@@ -194,7 +194,7 @@ def convert_intermimic(
             report.seconds_per_sequence[sid] = time.perf_counter() - t0
             report.fk_rotation_error_deg[sid] = rec.extra["fk_rotation_error_deg"]
             bar.advance(task)
-        w.file.attrs["input_sha256"] = __import__("json").dumps(inputs, sort_keys=True)
+        w.set_attr("input_sha256", inputs)
     return report
 
 

@@ -16,7 +16,6 @@ contacts come from geometry and static supports are inferred where the object re
 
 from __future__ import annotations
 
-import json
 import re
 import time
 from dataclasses import dataclass
@@ -287,7 +286,7 @@ def convert_skillmimic_parahome(
             report.seconds_per_sequence[clip.sequence_id] = time.perf_counter() - t0
             report.fk_rotation_error_deg[clip.sequence_id] = seq.extra["fk_rotation_error_deg"]
             bar.advance(task)
-        w.file.attrs["input_sha256"] = json.dumps(inputs, sort_keys=True)
+        w.set_attr("input_sha256", inputs)
     return report
 
 

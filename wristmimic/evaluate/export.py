@@ -38,7 +38,8 @@ from wristmimic.evaluate.runner import _check_dataset, _env_dict, _progress
 from wristmimic.evaluate.trials import Records, TrialSettings, make_env, run_trials
 from wristmimic.format.records import SequenceRecord
 from wristmimic.humanoid.kinematics import joint_quat_from_hinges
-from wristmimic.safe_io import check_output_file, defer_sigint, sha256_file
+from wristmimic.rotations import quat_normalize
+from wristmimic.safe_io import check_output_file, sha256_file
 from wristmimic.sim.backend import BACKENDS
 
 CONVERTER = "export"
@@ -173,8 +174,7 @@ def _finite_frames(a: dict[str, np.ndarray]) -> int:
 
 
 def _unit(q: np.ndarray) -> np.ndarray:
-    q = q.astype(np.float64)
-    return (q / np.linalg.norm(q, axis=-1, keepdims=True)).astype(np.float32)
+    return quat_normalize(q).astype(np.float32)
 
 
 class _SequenceBuilder:
@@ -533,8 +533,7 @@ def export_rollouts(
                 what = "succeeded" if successful_only else "stayed finite for 2 frames"
                 raise InputError(out, None, f"none of the {plan.n} trials {what}; nothing written", "a better policy")
             summary = {**prov, "trials": plan.n, "successes": successes, "sequences": len(written)}
-            with defer_sigint():
-                w.file.attrs["export"] = json.dumps(summary, sort_keys=True)
+            w.set_attr("export", summary)
     finally:
         env.on_step = None
         env.close()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import json
 import os
 from collections.abc import Callable
@@ -122,11 +123,11 @@ def _whole(method: _F) -> _F:
     """Run ``method`` with Ctrl-C held back until it returns, so HDF5 is never interrupted mid-call; the
     KeyboardInterrupt then arrives between records and the writer removes its temporary file cleanly."""
 
+    @functools.wraps(method)
     def run(*args: Any, **kwargs: Any) -> Any:
         with defer_sigint():
             return method(*args, **kwargs)
 
-    run.__name__, run.__doc__ = method.__name__, method.__doc__
     return run  # type: ignore[return-value]
 
 
@@ -239,6 +240,13 @@ class DatasetWriter:
         return self._f
 
     # -- content -------------------------------------------------------------------------------------------
+    @_whole
+    def set_attr(self, key: str, value: Any) -> None:
+        """Set a root attribute once the content is known (dicts and lists as sorted JSON text)."""
+        self.check()
+        self.file.attrs[key] = _json(value) if isinstance(value, dict | list) else value
+        self.check()
+
     def has_humanoid(self, hid: str) -> bool:
         return hid in self.file["humanoids"]
 

@@ -126,7 +126,7 @@ class CpuRolloutBackend:
         the substeps (default). False: frame sensors from the kinematic probe (a quarter of its cost) and contact
         sensors of the last substep; measured on synth_default this stalled learning (no policy reached the
         contact phase by 410k frames where the default did at ~240k), so it is a benchmark option only."""
-        self._kinematic = self._probe if self.exact_contacts else probe_model(model, kinematic=True)
+        self._after_step_probe = self._probe if self.exact_contacts else probe_model(model, kinematic=True)
         self.contact_columns = contact_sensor_columns(model)
         """sensordata columns of contact sensors: after :meth:`step` these come from the last substep."""
         d = mujoco.MjData(model)
@@ -203,7 +203,7 @@ class CpuRolloutBackend:
         )
         self._state[:] = self._out_state[:, -1]
         # frame sensors of the state just reached; contact sensors of the last substep (evaluated at its start)
-        self._sensor[:] = self._sensors_at(self._kinematic, self._state, np.ascontiguousarray(c[:, :1]))
+        self._sensor[:] = self._sensors_at(self._after_step_probe, self._state, np.ascontiguousarray(c[:, :1]))
         if not self.exact_contacts:
             cols = self.contact_columns
             self._sensor[:, cols] = self._out_sensor[:, -1, cols]
