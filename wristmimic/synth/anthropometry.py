@@ -85,6 +85,13 @@ class Choices:
     """Angle between the resting thumb and the middle finger, in the plane of the palm."""
     palm_half_thickness: float = 0.072
     """Half the thickness of the palm at the metacarpals, fraction of hand length (about 1.3 cm at 1.70 m)."""
+    wrist_half_thickness: float = 0.080
+    """Half the palmar-dorsal thickness of the distal forearm, fraction of hand length (about 1.5 cm at 1.70 m,
+    a little more than the palm). The forearm tapers to it: its distal half is a capsule of this radius. A
+    forearm of uniform (mid-forearm) radius would stand 2.7 cm proud of the palm, so a palm laid flat on a box
+    face would put the forearm inside the box (the reference of generator version 1 did, by 2.7 cm)."""
+    forearm_taper: float = 0.5
+    """Where along the forearm (elbow 0, wrist 1) the distal, wrist-sized capsule takes over."""
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from wristmimic.rotations import quat_rotate
 from wristmimic.synth.humanoid import SIDES, SynthHumanoid, build_humanoid
 from wristmimic.synth.motion import REFERENCE_HEIGHT, Motion, MotionSpec, generate_motion, hand_in_box, scaled
 
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"
 VARIANTS: dict[str, dict[str, Any]] = {
     "default": {},
     "turn": {
@@ -38,6 +38,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
         "frames": {"hold": 0, "turn": 36},
         "finger_pitch_deg": 40.0,  # fingers further down the faces: the wrists turn 90 deg more easily
         "put_down_shift": -0.05,  # put down where it was carried (the turned box is deeper: less far reach)
+        "arm_clearance": False,  # the hand on the far face after the turn has its forearm across the box
     },
     "small_box": {"box_size": (0.20, 0.22, 0.15)},
     "high_table": {"table_height": 0.90},
@@ -115,17 +116,26 @@ def _object_ids(spec: MotionSpec) -> tuple[str, str]:
 
 
 def box_clearance(
-    skel: Skeleton, fk: FKResult, center: np.ndarray, half: np.ndarray, spacing: float = 0.01
+    skel: Skeleton,
+    fk: FKResult,
+    center: np.ndarray,
+    half: np.ndarray,
+    spacing: float = 0.01,
+    quat: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(T, B) signed distance (m, < 0 inside) of each body's geom surface points to an axis-aligned box
-    (exact box SDF; used for the static table, whose humanoid contacts are not labelled)."""
+    """(T, B) signed distance (m, < 0 inside) of each body's geom surface points to a box (exact box SDF): the
+    static table (``center`` (3,), axis-aligned) or the moving box (``center`` (T, 3), ``quat`` (T, 4) wxyz)."""
     pts, gidx = C.geom_surface_points(skel.model, spacing)
     body = skel.model.geom_bodyid[gidx] - 1
     T = fk.geom_pos.shape[0]
+    center = np.broadcast_to(np.asarray(center, dtype=float), (T, 3))
+    inv = None if quat is None else np.asarray(quat, dtype=float) * np.array([1.0, -1.0, -1.0, -1.0])
     out = np.full((T, skel.num_bodies), np.inf)
     for t0 in range(0, T, 16):  # frame chunks bound the memory
         sl = slice(t0, min(t0 + 16, T))
-        world = fk.geom_pos[sl, gidx] + np.einsum("tpij,pj->tpi", fk.geom_mat[sl, gidx], pts) - center
+        world = fk.geom_pos[sl, gidx] + np.einsum("tpij,pj->tpi", fk.geom_mat[sl, gidx], pts) - center[sl, None]
+        if inv is not None:  # into the box frame
+            world = quat_rotate(np.broadcast_to(inv[sl, None], (*world.shape[:2], 4)), world)
         q = np.abs(world) - half
         sdf = np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)  # (t, P)
         for b in np.unique(body):
@@ -162,6 +172,8 @@ def quality(
     acc = np.linalg.norm(np.diff(fk.body_pos, n=2, axis=0), axis=-1) * 30.0**2 if T > 2 else np.zeros((1, 1))
     non_finger = roles["non_finger"]
     table_d = box_clearance(skel, fk, motion.table_pos, np.asarray([*spec.table_size, spec.table_height]) / 2)
+    arms = [skel.index(f"{s}_{k}") for s, _ in SIDES for k in ("Shoulder", "Elbow")]
+    arm_d = box_clearance(skel, fk, motion.box_pos, np.asarray(spec.box_size) / 2, 0.005, motion.box_quat)[:, arms]
     box_bottom = motion.box_pos[:, 2] - spec.box_size[2] / 2
     hand_flags = C.hand_contact(labels, roles["left_hand"], roles["right_hand"])
     res = {k: float(np.nanmax(v)) for k, v in motion.residuals.items()}
@@ -173,6 +185,7 @@ def quality(
         "max_finger_speed_rad_s": float(speed[:, fingers].max()) if len(speed) else 0.0,
         "max_body_acc_m_s2": float(acc[:, non_finger].max()),
         "table_clearance_m": float(table_d.min()),
+        "arm_box_clearance_m": float(arm_d.min()),
         "box_bottom_minus_table_m": {
             "start": float(box_bottom[0] - spec.table_height),
             "end": float(box_bottom[-1] - spec.table_height),

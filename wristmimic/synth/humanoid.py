@@ -102,7 +102,7 @@ def _box(center, half) -> str:
 
 
 def _geoms(a: Anthropometry, off: dict[str, np.ndarray]) -> dict[str, str]:
-    """One collision geom per body, in the body frame."""
+    """The collision geoms of each body (one, two for the tapered forearm), in the body frame."""
     H, HL, c, circ = a.height, a.hand_length, a.choices, a.circumferences
     b = a.body
     r_of = lambda frac: frac * H / (2 * np.pi)  # noqa: E731  circumference -> radius
@@ -137,7 +137,11 @@ def _geoms(a: Anthropometry, off: dict[str, np.ndarray]) -> dict[str, str]:
         g[f"{s}_Toe"] = _box([toe_len / 2, 0, -bh / 2], [toe_len / 2, 0.9 * fw / 2, bh / 2])
         g[f"{s}_Thorax"] = _capsule(z0, 0.8 * off[f"{s}_Shoulder"], r_of(circ.thorax))
         g[f"{s}_Shoulder"] = _capsule(0.12 * off[f"{s}_Elbow"], 0.88 * off[f"{s}_Elbow"], r_of(circ.upper_arm))
-        g[f"{s}_Elbow"] = _capsule(0.08 * off[f"{s}_Wrist"], 0.92 * off[f"{s}_Wrist"], r_of(circ.forearm))
+        # forearm: mid-forearm radius near the elbow, tapering to the wrist's thickness (two capsules)
+        wr, k = off[f"{s}_Wrist"], c.forearm_taper
+        g[f"{s}_Elbow"] = _capsule(0.08 * wr, k * wr, r_of(circ.forearm)) + _capsule(
+            k * wr, 0.88 * wr, c.wrist_half_thickness * HL
+        )
         # palm: a box from the wrist to the metacarpal heads, as broad as the MCP spread plus a finger radius
         mcp = np.stack([off[f"{s}_{f}1"] for f in FINGERS if f != "Thumb"])
         rf = circ.finger[0] * HL

@@ -10,7 +10,10 @@ flat), hands (palm point position and wrist orientation), the centre of mass ins
 feet (with the carried share of a held object's mass added at its position) and the pelvis orientation.
 Fingers and toes are set outside the IK (toes stay flat; fingers close by :func:`finger_closure`). Euler y
 limits stay inside +-85 deg, so the hinge angles equal the intrinsic XYZ Euler angles of the joint rotations.
-Jacobians: ``mj_jac`` (palm points), ``mj_jacBody`` (feet, pelvis), ``mj_jacSubtreeCom`` (centre of mass).
+Arm clearance: points along the upper-arm and forearm capsules closer to an obstacle box (the held box) than
+their radius plus a margin are pushed out along the box's distance gradient (a one-sided task, re-linearised every
+step). Jacobians: ``mj_jac`` (palm points, arm points), ``mj_jacBody`` (feet, pelvis), ``mj_jacSubtreeCom``
+(centre of mass).
 """
 
 from __future__ import annotations
@@ -80,6 +83,11 @@ class IKWeights:
     """Largest change of any DoF (rad or m) in one Gauss-Newton step."""
     damping: float = 0.02
     """lambda: damping of each Gauss-Newton step."""
+    clearance: float = 30.0
+    """Weight of the arm-clearance task (one-sided: only points closer to the obstacle than their radius plus
+    ``clearance_margin`` pull)."""
+    clearance_margin: float = 0.002
+    """Wanted gap (m) between the arm capsules (upper arm, forearm) and the obstacle box."""
 
 
 @dataclass
@@ -97,6 +105,9 @@ class FrameTargets:
     pelvis_yaw: float = 0.0
     com_band: tuple[float, float] = (0.035, 0.03)
     """Half extents (x, y) of the centre-of-mass region around ``com_xy`` (inside it the CoM is free)."""
+    obstacle: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    """A box the arms must stay out of: (centre (3,), rotation (3, 3), half extents (3,)); None: no such task.
+    The hands are not part of it (they hold the box)."""
 
 
 def _kind(name: str) -> str:
@@ -142,6 +153,10 @@ class WholeBodyIK:
         self.mass = float(m.body_subtreemass[1])
         self._jp = np.zeros((3, nv))
         self._jr = np.zeros((3, nv))
+        arm = [self.bid[f"{s}_{k}"] for s, _ in SIDES for k in ("Shoulder", "Elbow")]
+        self.arm_geoms = [
+            int(g) for g in np.flatnonzero(np.isin(m.geom_bodyid, arm)) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
+        ]
 
     # -- helpers -----------------------------------------------------------------------------------------------
     def neutral_qpos(self, root_pos: np.ndarray) -> np.ndarray:
@@ -167,6 +182,31 @@ class WholeBodyIK:
         b = self.bid[f"{side}_Wrist"]
         R = self.data.xmat[b].reshape(3, 3)
         return self.data.xpos[b] + R @ self.h.palm_point[side], R.copy()
+
+    def arm_clearance(
+        self, obstacle: tuple[np.ndarray, np.ndarray, np.ndarray], samples: int = 9
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Points along the arm capsule axes at the current state and their box clearance: (P, 3) points,
+        (P,) body ids, (P,) capsule radii, (P,) signed distance of the axis point to the box (< 0 inside) and
+        (P, 3) the box distance gradient (world, unit)."""
+        m, d = self.model, self.data
+        centre, R, half = obstacle
+        u = np.linspace(-1.0, 1.0, samples)
+        g = np.asarray(self.arm_geoms)
+        axis = d.geom_xmat[g].reshape(-1, 3, 3)[:, :, 2]
+        pts = (d.geom_xpos[g][:, None] + (u[None, :, None] * m.geom_size[g, 1][:, None, None]) * axis[:, None]).reshape(
+            -1, 3
+        )
+        body = np.repeat(m.geom_bodyid[g], samples)
+        rad = np.repeat(m.geom_size[g, 0], samples)
+        loc = (pts - centre) @ R
+        q = np.abs(loc) - half
+        out = np.maximum(q, 0.0)
+        norm = np.linalg.norm(out, axis=1)
+        sdf = norm + np.minimum(q.max(axis=1), 0.0)
+        grad = np.where(norm[:, None] > 0, out / np.maximum(norm, 1e-12)[:, None], np.eye(3)[q.argmax(axis=1)])
+        grad = (grad * np.sign(loc + 1e-12)) @ R.T
+        return pts, body, rad, sdf, grad
 
     def forward(self, q: np.ndarray) -> None:
         self.data.qpos[:] = q
@@ -214,6 +254,11 @@ class WholeBodyIK:
         tot = self.mass + tgt.held_mass
         com = (self.mass * d.subtree_com[1] + tgt.held_mass * tgt.held_pos) / tot
         add(self._jp[:2] * (self.mass / tot), self._com_err(tgt, com), w.com)
+        if tgt.obstacle is not None:
+            pts, body, rad, sdf, grad = self.arm_clearance(tgt.obstacle)
+            for i in np.flatnonzero(sdf < rad + w.clearance_margin):
+                mujoco.mj_jac(m, d, self._jp, self._jr, pts[i], int(body[i]))
+                add(grad[i][None] @ self._jp, np.array([rad[i] + w.clearance_margin - sdf[i]]), w.clearance)
         c, sn = np.cos(tgt.pelvis_yaw), np.sin(tgt.pelvis_yaw)
         mujoco.mj_jacBody(m, d, self._jp, self._jr, 1)
         add(self._jr.copy(), self._rot_err(np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]]), 1), w.pelvis_rot)

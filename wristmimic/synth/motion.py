@@ -90,6 +90,9 @@ class MotionSpec:
     """Yaw of the box about its vertical axis while lifted (the 'turn' phase); 0: no turn phase."""
     pelvis_follow: float = 0.4
     """Fraction of the box's turn the pelvis yaw follows."""
+    arm_clearance: bool = True
+    """Keep the upper arms and forearms out of the box (an IK task; off along the reach's joint-space arc). The
+    turn variant turns it off: with the hands on the faces they held, one forearm must cross the turned box."""
     finger_pitch_deg: float = 20.0
     """Fingers point forward and this much down along the side faces."""
     press: float = 0.003
@@ -277,8 +280,11 @@ def generate_motion(
             pos[side], mat[side] = box_p + Rb @ p_l, Rb @ R_l
         return pos, mat
 
-    def targets(hands_pos, hands_mat, box_p, yaw, load: float, twist: float = 0.0) -> FrameTargets:
-        """Targets of one frame; ``twist`` (0..1): how much of the box's turn the pelvis follows."""
+    def targets(
+        hands_pos, hands_mat, box_p, yaw, load: float, twist: float = 0.0, clear: bool = True
+    ) -> FrameTargets:
+        """Targets of one frame; ``twist`` (0..1): how much of the box's turn the pelvis follows; ``clear``: keep
+        the arms out of the box (off along the joint-space arcs of reach and retract, which pass over it)."""
         return FrameTargets(
             feet_pos,
             feet_mat,
@@ -288,6 +294,9 @@ def generate_motion(
             held_mass=box_mass * load,
             held_pos=box_p,
             pelvis_yaw=twist * spec.pelvis_follow * (yaw - lay.yaw0),
+            obstacle=(box_p, _rz(yaw), np.asarray(spec.box_size, dtype=float) / 2)
+            if clear and spec.arm_clearance
+            else None,
         )
 
     # standing with arms hanging (no hand task): the rest posture, long solve from the neutral posture
@@ -366,7 +375,7 @@ def generate_motion(
             palms = {side: ik.palm_world(side) for side, _ in SIDES}
             untwist = 0.0 if phase == "reach" else 1.0 - s_  # the pelvis turns back with the retract
             hp, hm = {k: v[0] for k, v in palms.items()}, {k: v[1] for k, v in palms.items()}
-            tgt = targets(hp, hm, bp, yaw, 0.0, twist=untwist)
+            tgt = targets(hp, hm, bp, yaw, 0.0, twist=untwist, clear=phase == "retract")
             q = ik.solve(q, tgt, spec.ik_iterations, track=(qj, 4.0 * s_ * (1.0 - s_) * spec.path_weight))
         else:
             if phase in ("stand", "rest"):
