@@ -40,4 +40,7 @@ def test_presets_set_their_environment() -> None:
     assert paper.action_mode == "absolute" and not paper.object_controller.enabled and not paper.starts.adaptive
     assert cpu.action_mode == "residual" and cpu.object_controller.enabled and cpu.starts.adaptive
     assert preset_env("cpu", "intermimic").finger_targets  # the variant's flags stay
+    # the recipe weighs the object's rotation 10x the paper (a tipped box must cost reward)
+    assert paper.weights.orot == pytest.approx(0.1) and cpu.weights.orot == pytest.approx(1.0)
+    assert cpu.weights.op == paper.weights.op  # other weights stay the paper's
     assert preset("paper").schedule == "fixed" and not preset("paper").learn_std

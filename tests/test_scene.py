@@ -15,7 +15,7 @@ from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.intermimic import convert_intermimic
 from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
 from wristmimic.format import open_dataset
-from wristmimic.scene import SceneConfig, build_scene, finger_ranges, gain_groups
+from wristmimic.scene import SceneConfig, build_scene, finger_ranges, gain_groups, scene_config_from_dict
 
 from synthetic import write_intermimic_folder, write_parahome_folder
 
@@ -64,6 +64,22 @@ def test_smplx_scene_gains_ranges_and_collisions(synth_files: tuple[Path, Path])
     hulls = [g for g in range(m.ngeom) if m.geom_bodyid[g] == o.body_id and m.geom_contype[g]]
     assert len(hulls) == o.record.num_hulls
     assert {"pos:Pelvis", "contact:L_Wrist", "touch:L_Index3:box", "quat:obj_box"} <= set(sc.sensors)
+
+
+def test_hand_contacts_have_torsional_friction_and_old_runs_keep_theirs(synth_files: tuple[Path, Path]) -> None:
+    with open_dataset(synth_files[0]) as ds:
+        sc = build_scene(ds, "sub1_box_000")
+        old = build_scene(ds, "sub1_box_000", scene_config_from_dict({"timestep": 1 / 120}))
+    fingers = ("Wrist", "Index", "Middle", "Ring", "Pinky", "Thumb")
+    hand = {sc.body_ids[b] for b, n in enumerate(sc.skeleton.body_names) if any(f in n for f in fingers)}
+    for model, condim, torsion in ((sc.model, 4, 0.015), (old.model, 3, 0.005)):
+        g = [k for k in range(model.ngeom) if model.geom_bodyid[k] in hand]
+        assert g and (model.geom_condim[g] == condim).all()
+        if condim == 4:
+            assert np.allclose(model.geom_friction[g, 1], torsion)
+        ids = set(sc.body_ids.tolist())
+        body = [k for k in range(model.ngeom) if model.geom_bodyid[k] in ids and model.geom_bodyid[k] not in hand]
+        assert (model.geom_condim[body] == 3).all()  # only the hands get torsional friction
 
 
 def test_parahome_scene_has_fixed_supports(synth_files: tuple[Path, Path]) -> None:

@@ -22,8 +22,9 @@ class DemoConfig:
     out: Path = Path("outputs/demo")
     """Everything goes here: demo.h5, run/, eval/, report/, demo.rrd."""
     seed: int = 0
-    train_frames: int = 300_000
-    """Training budget in environment frames (CPU preset)."""
+    train_frames: int = 400_000
+    """Training budget in environment frames (CPU preset; about 7 minutes on 2 cores). Seed 0 of the recipe
+    succeeds in 99.6 % of 256 quick trials after 405k frames (see the README's status)."""
     trials: int = 256
     """Evaluation trials (the paper uses 10,000; see ``wristmimic evaluate``)."""
     num_envs: int = 64

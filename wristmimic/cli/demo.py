@@ -43,7 +43,10 @@ def demo_cmd(
     with user_errors():
         r = run_demo(cfg, nthread=nthread, echo=typer.echo)
     took = ", ".join(f"{k} {v:.0f} s" for k, v in r.seconds.items())
-    typer.echo(f"\ndone ({took}); success {r.success_pct:.1f} % of {cfg.trials} trials after a short training.")
+    typer.echo(
+        f"\ndone ({took}); the policy succeeds in {r.success_pct:.1f} % of {cfg.trials} quick-protocol trials "
+        f"after {cfg.train_frames:,} training frames."
+    )
     typer.echo(f"  dataset     {r.dataset}   (wristmimic inspect {r.dataset})")
     typer.echo(
         f"  policy      {r.run_dir}/   (metrics.csv, checkpoint.pt; continue: wristmimic train --resume {r.run_dir})"

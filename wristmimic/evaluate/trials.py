@@ -66,13 +66,11 @@ def make_env(
     backend_options: dict | None = None,
 ) -> WristMimicEnv:
     """The evaluation environment of a policy's scene (``meta``: :attr:`EvalPolicy.metadata`) on ``backend``."""
-    from wristmimic.scene import SceneConfig
+    from wristmimic.scene import scene_config_from_dict
 
     sc = meta.get("scene_config")
     if isinstance(sc, dict):
-        from wristmimic.rl.config import from_jsonable
-
-        sc = from_jsonable(SceneConfig, sc)
+        sc = scene_config_from_dict(sc)
     env = WristMimicEnv.from_file(
         dataset or meta["dataset"],
         meta["scene"],

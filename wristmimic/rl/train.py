@@ -23,7 +23,7 @@ from wristmimic.rl.checkpoint import CHECKPOINT_NAME, RUN_FILES, load_checkpoint
 from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, preset_env, to_jsonable
 from wristmimic.rl.runner import Runner, TrainingError
 from wristmimic.safe_io import atomic_output, sha256_file
-from wristmimic.scene import SceneConfig
+from wristmimic.scene import SceneConfig, scene_config_from_dict
 from wristmimic.sim.backend import BACKENDS
 
 
@@ -108,7 +108,7 @@ def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any
 def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_file: Path | None = None) -> Runner:
     ppo = from_jsonable(PPOConfig, config["ppo"])
     env_cfg = env_config_from_dict(config["env"])
-    scene_cfg = from_jsonable(SceneConfig, config["scene_config"])
+    scene_cfg = scene_config_from_dict(config["scene_config"])
     # the training scene alone carries the virtual object controller's motors (config.json records the user's)
     scene_cfg = replace(scene_cfg, object_actuators=env_cfg.object_controller.enabled)
     physics = config.get("physics") or {"backend": "cpu"}  # runs from before backends existed: CPU
