@@ -111,6 +111,13 @@ def test_default_export_is_a_valid_canonical_file_of_the_policy_mean(run: Path, 
         assert e["ended"] == (f"terminated ({e['termination_reason']})" if e["terminated"] else "end of the reference")
         root = json.loads(a["export"])
         assert root["trials"] == 1 and root["sequences"] == 1 and root["checkpoint_sha256"] == e["checkpoint_sha256"]
+    import h5py
+
+    with h5py.File(out, "r") as f:  # repeated arrays are written once, as hard links (the same HDF5 object)
+        g = f["sequences"][f"{SID}__sim_mean"]
+        assert g["source_body_pos"] == g["body_pos"] and g["contacts/geometric"] == g["contacts/labels"]
+        assert g["body_quat"] != g["body_pos"] and g["body_pos"].compression == "gzip"
+        assert np.array_equal(g["source_body_pos"][()], g["body_pos"][()])
 
 
 def test_round_trip_replays_the_recorded_poses(run: Path, tmp_path: Path) -> None:

@@ -1,6 +1,7 @@
 """``wristmimic run --ray``: a 2-scene pipeline on a local Ray (2 CPUs) writes the same run and evaluation folders
-and the same report as the serial run; a second run dispatches nothing; a failing job is reported with its error
-and the others are kept; bad addresses and a missing Ray fail with one line; ray is imported only for --ray."""
+and the same report as the serial run; a second run dispatches nothing; the export stage's files validate; a
+failing job is reported with its error and the others are kept; bad addresses and a missing Ray fail with one
+line; ray is imported only for --ray."""
 
 from __future__ import annotations
 
@@ -144,6 +145,35 @@ def test_ray_local_matches_serial_and_a_second_run_dispatches_nothing(tmp_path: 
     code, out = _run(str(spec), *LOCAL)
     assert code == 0 and "0 ran, 5 up to date" in out and "dispatched" not in out, out
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+
+
+def test_export_stage_after_ray_jobs_writes_files_that_validate(tmp_path: Path, tiny_h5: Path) -> None:
+    """The [export] stage runs on the driver once the Ray jobs have brought their runs and evaluations back: it
+    replays the evaluations' first rows, its files validate and name their checkpoints, and the report stage
+    adds their plausibility."""
+    from wristmimic.format.reader import open_dataset
+    from wristmimic.format.validate import validate
+
+    spec = _spec(tmp_path, tiny_h5)
+    spec.write_text(spec.read_text().replace("[report]", "[export]\ntrials = 2\nnum_envs = 2\n[report]"))
+    code, out = _run(str(spec), *LOCAL)
+    assert code == 0, out
+    assert "ray: 2 job(s) dispatched" in out and "7 ran, 0 up to date" in out, out
+    work = tmp_path / "work"
+    for scene in SCENES:
+        (run,) = (r for r in (work / "runs").iterdir() if r.name.startswith(scene))
+        out_h5 = work / "export" / f"{scene}.h5"
+        assert validate(out_h5) == [], scene
+        with open_dataset(out_h5) as ds:
+            root = json.loads(ds.attrs["export"])
+            assert root["mode"] == "from-eval" and root["from_eval"] == str((run / "eval" / "quick").resolve())
+            assert root["checkpoint_sha256"] == sha256_file(run / "checkpoint.pt") and root["trials"] == 2
+            seeds = pd.read_parquet(run / "eval" / "quick" / f"{scene}.parquet")["seed"].tolist()[:2]
+            assert ds.sequence_ids == sorted(f"{scene}__sim_{s}" for s in seeds)
+    plaus = pd.read_csv(tmp_path / "report" / "plausibility.csv")
+    assert plaus["scene"].tolist() == list(SCENES) and plaus["sim_sequences"].tolist() == [2, 2]
+    code, out = _run(str(spec), *LOCAL)
+    assert code == 0 and "0 ran, 7 up to date" in out and "dispatched" not in out, out
 
 
 def test_a_failing_job_is_reported_and_the_others_kept(tmp_path: Path, tiny_h5: Path) -> None:

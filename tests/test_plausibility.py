@@ -273,15 +273,15 @@ def test_inspect_prints_plausibility_and_can_skip_it(synth: Path) -> None:
     assert r.exit_code == 1 and "nope" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
-def _fake_export(synth: Path, out: Path, sunk_m: float) -> Path:
+def _fake_export(synth: Path, out: Path, sunk_m: float, checkpoint_sha256: str = "") -> Path:
     """A file shaped like `wristmimic export` output: the reference sequence as ``<scene>__sim_7``, sunk into the
-    floor by ``sunk_m``, with the root ``export`` attribute naming the dataset."""
+    floor by ``sunk_m``, with the root ``export`` attribute naming the dataset (and the checkpoint's sha256)."""
     with open_dataset(synth) as ds:
         seq = ds.sequence(SID).load()
         hum, objs = ds.humanoid(seq.humanoid_id), {o: ds.object(o) for o in seq.object_ids}
     seq.root_pos = seq.root_pos - np.array([0, 0, sunk_m], np.float32)
     seq.body_pos = seq.body_pos - np.array([0, 0, sunk_m], np.float32)
-    attrs = {"export": {"dataset": str(synth), "scene": SID}}
+    attrs = {"export": {"dataset": str(synth), "scene": SID, "checkpoint_sha256": checkpoint_sha256}}
     with DatasetWriter(
         out, source_dataset="synthetic", source_format="wristmimic-run", converter="export", input_sha256={},
         extra_attrs=attrs,
@@ -315,3 +315,37 @@ def test_report_tables_reference_against_simulation(synth: Path, tmp_path: Path)
     r = CliRunner().invoke(app, ["report", str(ev), "--plausibility", str(sim), "-o", str(tmp_path / "rep3")])
     assert r.exit_code == 0, r.output
     assert (tmp_path / "rep3" / "plausibility.csv").read_text() == (tmp_path / "rep" / "plausibility.csv").read_text()
+
+
+def test_report_finds_the_export_of_the_evaluated_policy_beside_its_evaluation(synth: Path, tmp_path: Path) -> None:
+    import pandas as pd
+    from test_report import fake_eval
+
+    run, sha = tmp_path / "run", "ab" * 32
+    ev = fake_eval(tmp_path / "run" / "eval" / "paper", "synthetic", "WristMimic (Ours)", "wristmimic", SID, 4, 3, 5.0)
+    doc = json.loads((ev / "summary.json").read_text())
+    doc["policy"] |= {"checkpoint_sha256": sha, "run_dir": str(run)}
+    (ev / "summary.json").write_text(json.dumps(doc))
+    _fake_export(synth, tmp_path / "other.h5", 0.10, "cd" * 32)
+    shutil.copy(tmp_path / "other.h5", ev / "other_checkpoint.h5")  # another policy's export: passed over
+    shutil.copy(synth, ev.parent / "reference.h5")  # a dataset, not an export: passed over
+    (run / "broken.h5").write_bytes(b"not hdf5")  # unreadable: passed over
+    for where in (run, ev.parent, ev):  # the run folder, the evaluation's parent, the evaluation folder
+        sim = _fake_export(synth, where / "sim.h5", 0.03, sha)
+        res = build_report([ev], tmp_path / f"rep_{where.name}", plausibility=None)
+        assert res.exports == [sim.resolve()] and "plausibility.csv" in res.files, where
+        df = pd.read_csv(tmp_path / f"rep_{where.name}" / "plausibility.csv")
+        assert df["sim_sequences"].tolist() == [1]
+        sim_mm, ref_mm = df["body_floor_depth_max_mm_sim"][0], df["body_floor_depth_max_mm_ref"][0]
+        assert sim_mm - ref_mm == pytest.approx(30.0, abs=1.0), where
+        sim.unlink()
+    sim = _fake_export(synth, run / "sim.h5", 0.03, sha)
+    given = build_report([ev], tmp_path / "rep_given", plausibility=[sim])  # given and found: counted once
+    assert given.exports == [sim]
+    assert "plausibility.csv" not in build_report([ev], tmp_path / "rep_off", find_exports=False).files
+    r = CliRunner().invoke(app, ["report", str(ev), "-o", str(tmp_path / "rep_cli")])
+    assert r.exit_code == 0 and f"plausibility of the exports {sim.resolve()}" in r.output, r.output
+    r = CliRunner().invoke(app, ["report", str(ev), "--no-find-exports", "-o", str(tmp_path / "rep_cli_off")])
+    assert r.exit_code == 0 and not (tmp_path / "rep_cli_off" / "plausibility.csv").exists()
+    r = CliRunner().invoke(app, ["report", "--help"])
+    assert "--no-find-exports" in r.output

@@ -513,6 +513,7 @@ def test_view_an_exported_sequence_beside_its_reference(files, tmp_path: Path) -
     assert all(len(x) <= LEGEND_CHARS and not x.endswith("~") for x in legend.values()), legend  # none cut
     views = blueprint_views(out)
     assert views["penetration and hand gap (m)"]["TimeAxis:view_range"] == [{"start": 0, "end": 19}]
+    assert "reward" not in views and "contact and phase" in views  # no empty reward view: an export has none
     if n < 20:  # the tiny policy's episode ended early
         assert rec.temporal("/sim", "Clear:is_recursive")[0].tolist() == [n]
     assert seq in rec.static("/info", "TextDocument:text")[0]

@@ -520,8 +520,15 @@ def report_stage(ctx: Context, p: dict[str, Any]) -> None:
     if not evals:
         raise InputError(ctx.spec_path, "[report]", "no evaluation to report", "an [evaluate] stage before it")
     out = Path(p.get("output", ctx.work_dir / "report"))
+    exports = [Path(e) for e in ctx.outputs.get("exports") or []]  # the [export] stage's files, if it ran
     inputs = {"evals": {str(e): _hash_path(e) for e in evals}, "params": p, "code": wristmimic.__version__}
-    ctx.cached("report", inputs, [out], lambda: build_report(list(evals), out, p.get("title"), p.get("splits")))
+    if exports:
+        inputs["exports"] = {str(e): _hash_path(e) for e in exports}
+
+    def work() -> None:
+        build_report(list(evals), out, p.get("title"), p.get("splits"), exports or None)
+
+    ctx.cached("report", inputs, [out], work)
 
 
 # ---------------------------------------------------------------------------------------------- running

@@ -18,7 +18,12 @@ def report_cmd(
         None,
         "--plausibility",
         help="Output of `wristmimic export` (repeatable): adds plausibility.csv and a table of the reference "
-        "against its simulated rollouts for every evaluated scene (docs/plausibility.md).",
+        "against its simulated rollouts for every evaluated scene (docs/plausibility.md). Exports beside an "
+        "evaluation are used without this: any *.h5 in the evaluation folder, its parent or its run folder whose "
+        "provenance (root attribute `export`) names the evaluated checkpoint's sha256 and scene.",
+    ),
+    find_exports: bool = typer.Option(
+        True, "--find-exports/--no-find-exports", help="Look for exports beside the evaluations (see --plausibility)."
     ),
 ) -> None:
     """Write per-scene, per-dataset, method x dataset and ablation tables (CSV), plots (PNG) and summary.md.
@@ -30,11 +35,16 @@ def report_cmd(
     Example: wristmimic report runs --split omomo20 --split parahome20 -o reports/paper --title "Paper splits"
 
     Example: wristmimic report runs/RUN/eval/paper --plausibility sim.h5 -o reports/RUN
+
+    Example: wristmimic export runs/RUN -o runs/RUN/sim.h5 --from-eval runs/RUN/eval/paper; wristmimic report
+    runs/RUN/eval/paper -o reports/RUN (sim.h5 is found in the run folder)
     """
     from wristmimic.report import build_report
     from wristmimic.safe_io import check_output_folder
 
     with user_errors():
         check_output_folder(out)
-        r = build_report(eval_dirs, out, title, split or None, plausibility or None)
+        r = build_report(eval_dirs, out, title, split or None, plausibility or None, find_exports)
         typer.echo(f"{r.out}: {r.scenes} scene(s), {r.trials:,} trials -> {', '.join(r.files)}")
+        if r.exports:
+            typer.echo(f"plausibility of the exports {', '.join(str(p) for p in r.exports)}")

@@ -471,6 +471,7 @@ def export_rollouts(
             converter=CONVERTER,
             input_sha256=inputs,
             extra_attrs={"export": prov},
+            link_repeats=True,  # source_body_pos is body_pos, contacts/geometric is contacts/labels: written once
         )
         with writer as w, _progress(f"export {meta['scene']}", 0, plan.n, progress) as advance:
             w.add_humanoid(seq.humanoid_id, humanoid)

@@ -148,8 +148,13 @@ class DatasetWriter:
         converter: str,
         input_sha256: dict[str, str],
         extra_attrs: dict[str, Any] | None = None,
+        link_repeats: bool = False,
     ):
+        """``link_repeats``: a sequence array that is the very same object as one written before it in that
+        sequence (an export's ``source_body_pos`` is its ``body_pos``) becomes an HDF5 hard link to it: read
+        back it is the same data, written and compressed once."""
         self.path = Path(path)
+        self._link_repeats = link_repeats
         self._attrs = {
             "format": schema.FORMAT_NAME,
             "schema_version": schema.SCHEMA_VERSION,
@@ -321,8 +326,13 @@ class DatasetWriter:
                 "extra": _json(s.extra),
             }
         )
+        seen: dict[tuple[int, str], str] = {}  # (id of the array, dtype) -> name written
         for name, arr in s.arrays().items():
             dtype = (schema.SEQUENCE_ARRAYS | schema.OPTIONAL_SEQUENCE_ARRAYS)[name][1]
+            if self._link_repeats and (id(arr), dtype) in seen:
+                g[name] = g[seen[id(arr), dtype]]  # hard link: the same dataset under a second name
+                continue
+            seen[id(arr), dtype] = name
             a = np.asarray(arr).astype(dtype, copy=False)
             kw: dict[str, Any] = {}
             if name in schema.PER_FRAME and T > 0:

@@ -3,13 +3,16 @@
 The simulation side comes from files written by ``wristmimic export`` (sequences ``<scene>__sim_<seed>``; their
 metrics are averaged per scene), the reference side from the dataset the export names (root attribute
 ``export.dataset``), else from the dataset the evaluation recorded (``summary.json`` ``policy.dataset``).
-Metric definitions: ``docs/plausibility.md``.
+Exports beside an evaluation are found without being named (:func:`exports_beside`): every ``*.h5`` directly in
+the evaluation folder, its parent folder or the run folder it names whose root ``export`` attribute names the
+evaluation's checkpoint (sha256) and scene. Metric definitions: ``docs/plausibility.md``.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +52,41 @@ def read_export(path: Path) -> tuple[str, dict[str, list[str]]]:
             scene = sid.rsplit("__sim_", 1)[0] if "__sim_" in sid else str(meta.get("scene", sid))
             scenes.setdefault(scene, []).append(sid)
     return dataset, scenes
+
+
+def _export_meta(path: Path) -> dict | None:
+    """The root ``export`` attribute of an HDF5 file as a dict; None for any other or unreadable file."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            raw = f.attrs.get("export")
+        meta = json.loads(raw.decode() if isinstance(raw, bytes) else raw) if raw is not None else None
+    except (OSError, ValueError, TypeError, AttributeError):
+        return None
+    return meta if isinstance(meta, dict) else None
+
+
+def exports_beside(sources: Iterable[dict]) -> list[Path]:
+    """Exports of the evaluated policies found next to their evaluations (sorted, each once).
+
+    ``sources``: per evaluation folder ``path``, ``scene``, ``run_dir`` and ``checkpoint_sha256`` (as
+    :func:`wristmimic.report.tables.load_evals` lists them). A ``*.h5`` directly in the evaluation folder, in its
+    parent or in the run folder is taken when its root ``export`` attribute has the same ``checkpoint_sha256``
+    and ``scene``; any other file there (a dataset, another run's export, an unreadable file) is passed over."""
+    found: set[Path] = set()
+    for src in sources:
+        sha, scene = src.get("checkpoint_sha256"), src.get("scene")
+        if not sha:
+            continue
+        d = Path(src["path"])
+        folders = {d, d.parent} | ({Path(src["run_dir"])} if src.get("run_dir") else set())
+        for folder in folders:
+            for f in sorted(folder.glob("*.h5")) if folder.is_dir() else []:
+                meta = _export_meta(f)
+                if meta and meta.get("checkpoint_sha256") == sha and meta.get("scene") == scene:
+                    found.add(f.resolve())
+    return sorted(found)
 
 
 def plausibility_table(scenes: list[str], exports: list[Path], eval_datasets: dict[str, str]) -> pd.DataFrame:

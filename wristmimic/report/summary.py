@@ -11,7 +11,8 @@ Output folder::
     terminations.csv           trials per termination reason
     hands.csv                  per hand, method and dataset (paper Table 4), only when a hand was swapped
     plausibility.csv           per scene: plausibility metrics of the reference and of its exported rollouts
-                               (only with ``plausibility=[EXPORT.h5, ...]``; docs/plausibility.md)
+                               (with ``plausibility=[EXPORT.h5, ...]`` or an export found beside an evaluation,
+                               see :func:`wristmimic.report.plausibility.exports_beside`; docs/plausibility.md)
     success_per_scene.png, error_distributions.png, termination_reasons.png, training_curves.png (if logs exist)
 """
 
@@ -35,6 +36,8 @@ class ReportResult:
     files: list[str] = field(default_factory=list)
     trials: int = 0
     scenes: int = 0
+    exports: list[Path] = field(default_factory=list)
+    """Export files whose rollouts are in plausibility.csv (given and found)."""
 
 
 def markdown_table(df: pd.DataFrame, digits: dict[str, int] | None = None) -> str:
@@ -61,13 +64,15 @@ def build_report(
     title: str | None = None,
     splits: list[str] | None = None,
     plausibility: list[Path] | None = None,
+    find_exports: bool = True,
 ) -> ReportResult:
     """Read evaluation folders and write every table, plot and ``summary.md`` into ``out``.
 
     ``splits`` (names in ``eval/splits`` or paths): keep only their scenes, label datasets by split, and report
     which listed scenes have no evaluation. Without it, the splits the evaluations recorded are used for that.
     ``plausibility``: files of ``wristmimic export``; adds ``plausibility.csv``, reference against simulation
-    for every evaluated scene.
+    for every evaluated scene. ``find_exports``: also use the exports of the evaluated policies found beside
+    their evaluations (:func:`~wristmimic.report.plausibility.exports_beside`).
     """
     check_output_folder(out, None)
     ev = T.load_evals(eval_dirs)
@@ -102,12 +107,19 @@ def build_report(
     if len(hand_t):
         written["hands.csv"] = hand_t
     plaus_t = None
-    if plausibility:
+    exports = list(plausibility or [])
+    if find_exports:
+        from wristmimic.report.plausibility import exports_beside
+
+        given = {Path(p).resolve() for p in exports}
+        exports += [p for p in exports_beside(ev.sources) if p not in given]
+    if exports:
         from wristmimic.report.plausibility import plausibility_table
 
         datasets = {s["scene"]: s["dataset"] for s in ev.sources if s.get("dataset")}
-        plaus_t = plausibility_table(sorted(set(t["scene"])), list(plausibility), datasets)
+        plaus_t = plausibility_table(sorted(set(t["scene"])), exports, datasets)
         written["plausibility.csv"] = plaus_t
+        res.exports = [Path(p) for p in exports]
     for name, df in written.items():
         T.write_csv(df, out / name)
     res.files += list(written)

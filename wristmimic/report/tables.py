@@ -58,7 +58,8 @@ class EvalSet:
     trials: pd.DataFrame
     """One row per trial: TRIAL_COLUMNS plus LABEL_COLUMNS."""
     sources: list[dict[str, Any]]
-    """Per folder: path, scene, method, run_dir (for training curves), dataset (the policy's, if recorded)."""
+    """Per folder: path, scene, method, run_dir (for training curves), dataset and checkpoint_sha256 (the
+    policy's, if recorded)."""
 
 
 def find_eval_dirs(paths: list[Path]) -> list[Path]:
@@ -166,9 +167,11 @@ def load_evals(paths: list[Path]) -> EvalSet:
         frames.append(df)
         run_dir = doc.get("policy", {}).get("run_dir")
         dataset = doc.get("policy", {}).get("dataset")
+        sha = doc.get("policy", {}).get("checkpoint_sha256")
         sources.append(
-            {"path": str(d), "scene": scene, "method": row["method"], "run_dir": run_dir, "dataset": dataset}
-        )
+            {"path": str(d), "scene": scene, "method": row["method"], "run_dir": run_dir, "dataset": dataset,
+             "checkpoint_sha256": sha if isinstance(sha, str) else None}
+        )  # fmt: skip
     protocols = sorted({f["protocol"].iloc[0] for f in frames if len(f)})
     if len(protocols) > 1:
         raise InputError(

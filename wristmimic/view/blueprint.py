@@ -39,9 +39,12 @@ def make_blueprint(
     fps: float = 30.0,
     num_frames: int | None = None,
     plausibility: bool = False,
+    reward: bool = True,
 ) -> rrb.Blueprint:
-    """A 3D view of ``/ref/**`` (and ``/sim/**``, ``/episode/**``), time-series views of ``/metrics/**`` (x axis:
-    the whole clip of ``num_frames``) and the info text; ``plausibility``: tabs of the plausibility series.
+    """A 3D view of ``/ref/**`` (and ``/sim/**``, ``/episode/**``) above the info text, beside time-series views
+    of ``/metrics/**`` (x axis: the whole clip of ``num_frames``); ``plausibility``: tabs of the plausibility
+    series; ``reward``: a reward view (with the simulation; an exported rollout has no reward, and an empty view
+    took the height the legends need).
 
     ``hidden``: entity paths (subtrees) that start hidden in the 3D view, e.g. collision hulls.
     """
@@ -60,8 +63,8 @@ def make_blueprint(
         plots += [
             series("position error (m)", POSITION_ERRORS),
             series("rotation error (deg)", ROTATION_ERRORS),
-            series("reward", ["/metrics/reward"]),
         ]
+        plots += [series("reward", ["/metrics/reward"])] if reward else []
     plots.append(series("contact and phase", CONTACT_AND_PHASE))
     if plausibility:
         views = [
@@ -70,8 +73,10 @@ def make_blueprint(
         ]
         plots.append(rrb.Tabs(*views, name="plausibility"))
     text = rrb.Tabs(rrb.TextDocumentView(name="info", origin="/info"), rrb.TextLogView(name="events", origin="/events"))
+    # the info panel under the 3D view, so the plots get the column's height: stacked with them, a 900-pixel
+    # window left each plot ~100 pixels and its legend showed only 3 of its 4 names (seen in Chromium)
     return rrb.Blueprint(
-        rrb.Horizontal(scene, rrb.Vertical(*plots, text), column_shares=[3, 2]),
+        rrb.Horizontal(rrb.Vertical(scene, text, row_shares=[4, 1]), rrb.Vertical(*plots), column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(state="expanded", timeline="frame", fps=fps),

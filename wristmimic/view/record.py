@@ -171,7 +171,12 @@ def write_recording(
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or str(uuid.uuid4()))
         try:
             blueprint = make_blueprint(
-                sim is not None, hidden, ref.fps, num_frames=ref.num_frames, plausibility=bool(plausibility)
+                sim is not None,
+                hidden,
+                ref.fps,
+                num_frames=ref.num_frames,
+                plausibility=bool(plausibility),
+                reward=sim is not None and bool(np.isfinite(sim.reward).any()),
             )
             rec.save(tmp, default_blueprint=blueprint)
             rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
