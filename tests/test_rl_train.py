@@ -219,3 +219,33 @@ def test_deployed_sigma_is_used_by_evaluation_but_not_by_training(dataset: Path,
     p = load_eval_policy(tmp_path / "run")
     assert p.policy.sigma.shape == (153,) and torch.allclose(p.sigma, torch.full((153,), 0.004))
     assert torch.allclose(torch.exp(p.policy.net.log_std), torch.full((153,), 0.1), rtol=1e-2)  # training sigma kept
+
+
+def test_deployed_moving_average_is_what_evaluation_loads_and_resume_keeps(dataset: Path, tmp_path: Path) -> None:
+    from wristmimic.evaluate.policy import load_eval_policy
+
+    start_run(_spec(dataset, 3, deploy_ema=0.9), tmp_path / "run", nthread=1, progress=False)
+    state = load_checkpoint(tmp_path / "run")
+    latest, avg = state["policy"], state["deploy_policy"]
+    assert avg.keys() == latest.keys()
+    w = "actor.0.weight"
+    assert not torch.equal(avg[w], latest[w])  # an average of three updates, not the last one
+    p = load_eval_policy(tmp_path / "run")
+    assert p.policy.weights == "ema" and p.metadata["policy_weights"] == "ema"
+    assert torch.equal(p.policy.net.state_dict()[w], avg[w])
+    # training is the same as without the average: identical latest weights and metrics
+    start_run(_spec(dataset, 3), tmp_path / "plain", nthread=1, progress=False)
+    assert _same_params(_params(tmp_path / "plain"), latest) and _rows(tmp_path / "plain") == _rows(tmp_path / "run")
+    assert load_eval_policy(tmp_path / "plain").policy.weights == "latest"
+    # the average resumes bit for bit
+    start_run(_spec(dataset, 1, deploy_ema=0.9), tmp_path / "split", nthread=1, progress=False)
+    resume_run(tmp_path / "split", max_frames=96, nthread=1, progress=False)
+    split = load_checkpoint(tmp_path / "split")["deploy_policy"]
+    assert _same_params(split, avg)
+
+
+def test_deployed_average_follows_the_warm_up_decay() -> None:
+    cfg = preset("cpu", deploy_ema=0.95)
+    assert cfg.ema_decay(1) == pytest.approx(2 / 11) and cfg.ema_decay(1000) == 0.95
+    with pytest.raises(InputError, match="deploy_ema"):
+        preset("cpu", deploy_ema=1.0)

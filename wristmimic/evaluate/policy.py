@@ -102,5 +102,6 @@ def load_eval_policy(run_dir_or_checkpoint: str | Path) -> RunPolicy:
         "checkpoint_sha256": sha256_file(ckpt),
         "preset": cfg.get("preset"),
         "feedforward": p.feedforward,
+        "policy_weights": p.weights,
     }
     return RunPolicy(p, meta)

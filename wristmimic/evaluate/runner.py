@@ -130,6 +130,8 @@ def _settings_dict(
         "noise": trials.noise,
         # the sigma of the sampled actions (mean over action dimensions; a run's ppo.deploy_std when set)
         **({"action_sigma": float(policy.sigma.mean())} if trials.noise == "actions" else {}),
+        # the deployed moving average of the weights (ppo.deploy_ema), where the run kept one
+        **({"policy_weights": "ema"} if m.get("policy_weights") == "ema" else {}),
         "max_object_position_error_m": trials.max_obj_pos_err_m,
         "min_contact_ratio": trials.min_contact_ratio,
         "early_termination": protocol.early_termination,

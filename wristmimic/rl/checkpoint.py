@@ -166,13 +166,18 @@ def _check_state(path: Path, state: dict[str, Any]) -> None:
             raise InputError(
                 path, f"metadata.{key}", "missing" if key not in state["metadata"] else "wrong type", _EXPECTED
             )
-    weights = state["policy"]
-    bad = next((k for k, v in weights.items() if not isinstance(v, torch.Tensor)), None)
-    if bad is not None:
-        raise InputError(path, f"policy.{bad}", f"holds {_kind(weights[bad])}", "a tensor")
-    for keys in (("normalizer.mean",), ("log_std_param", "log_std")):
-        if not any(k in weights for k in keys):
-            raise InputError(path, f"policy.{keys[0]}", "missing", "the policy network's weights")
+    for entry in ("policy", "deploy_policy"):
+        weights = state.get(entry)
+        if weights is None and entry == "deploy_policy":
+            continue
+        if not isinstance(weights, dict):
+            raise InputError(path, entry, f"holds {_kind(weights)}", "a dict of tensors")
+        bad = next((k for k, v in weights.items() if not isinstance(v, torch.Tensor)), None)
+        if bad is not None:
+            raise InputError(path, f"{entry}.{bad}", f"holds {_kind(weights[bad])}", "a tensor")
+        for keys in (("normalizer.mean",), ("log_std_param", "log_std")):
+            if not any(k in weights for k in keys):
+                raise InputError(path, f"{entry}.{keys[0]}", "missing", "the policy network's weights")
 
 
 def load_checkpoint(run_dir_or_file: str | Path) -> dict[str, Any]:

@@ -34,6 +34,8 @@ class Policy:
     """(T, D) the run's open-loop PD-target offsets (``WristMimicEnv.feedforward``), if it optimised them."""
     deploy_std: float = 0.0
     """``PPOConfig.deploy_std``: the sigma of sampled actions once deployed (0: the training sigma)."""
+    weights: str = "latest"
+    """Which weights ``net`` holds: ``latest`` (the last update's) or ``ema`` (``PPOConfig.deploy_ema``'s average)."""
 
     @property
     def sigma(self) -> torch.Tensor:
@@ -73,7 +75,7 @@ def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
     state = load_checkpoint(run_dir_or_checkpoint)
     config = json.loads(state["config"])
     ppo = from_jsonable(PPOConfig, config["ppo"])
-    weights = state["policy"]
+    weights = state.get("deploy_policy", state["policy"])  # the moving average, where the run kept one
     std_key = "log_std_param" if "log_std_param" in weights else "log_std"  # older checkpoints: 'log_std'
     obs_size, action_size = weights["normalizer.mean"].shape[0], weights[std_key].shape[0]
     net = ActorCritic(
@@ -100,4 +102,5 @@ def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
         config=config,
         feedforward=state.get("feedforward"),
         deploy_std=ppo.deploy_std,
+        weights="ema" if "deploy_policy" in state else "latest",
     )

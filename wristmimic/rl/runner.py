@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import copy
 import json
 import math
 import signal
@@ -87,6 +88,10 @@ class Runner:
             cfg.min_log_std,
         ).to(dev)
         self.alg = PPO(self.policy, cfg)
+        self.deploy_net: ActorCritic | None = None
+        """The deployed policy: an exponential moving average of ``policy`` (``cfg.deploy_ema`` > 0), else None."""
+        if cfg.deploy_ema > 0.0:
+            self.deploy_net = copy.deepcopy(self.policy).requires_grad_(False)
         self.storage = RolloutStorage(cfg.horizon, cfg.num_envs, env.observation_size, env.action_size, dev)
         self.noise = torch.zeros(cfg.num_envs, env.action_size, device=dev)
         if cfg.noise_correlation > 0.0:  # the AR(1) process starts from its stationary (standard normal) law
@@ -136,6 +141,7 @@ class Runner:
                         self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
                     episode_row = self.collect()
                     losses = self.alg.update(self.storage, self.gen)
+                    self._average_deployed(self.iteration + 1)
                     self._collect_write()  # the previous iteration's checkpoint: on disk before this one's row
                     self.check_finite(self.iteration + 1, losses)
                     self.storage.clear()
@@ -173,6 +179,24 @@ class Runner:
             self._writer = None
         return "interrupted" if self.stop_requested else "finished"
 
+    @torch.no_grad()
+    def _average_deployed(self, updates: int) -> None:
+        """Move the deployed average toward the latest weights (``cfg.deploy_ema``; nothing when off)."""
+        if self.deploy_net is None:
+            return
+        w = 1.0 - self.cfg.ema_decay(updates)
+        latest = self.policy.state_dict()
+        for key, avg in self.deploy_net.state_dict().items():
+            if avg.is_floating_point():
+                avg.lerp_(latest[key], w)
+            else:
+                avg.copy_(latest[key])
+
+    @property
+    def deployed(self) -> ActorCritic:
+        """The network evaluation deploys: the moving average when ``cfg.deploy_ema`` > 0, else the latest."""
+        return self.policy if self.deploy_net is None else self.deploy_net
+
     def _checkpoint_due(self) -> bool:
         c = self.cfg
         return self.iteration % c.checkpoint_every == 0 or _clock() - self._last_save >= c.checkpoint_seconds
@@ -209,6 +233,9 @@ class Runner:
     def _state_tensors(self) -> list[tuple[str, torch.Tensor]]:
         """The learned state a checkpoint saves: parameters, normaliser buffers and optimiser moments."""
         out = [(f"policy parameter {k}", v) for k, v in self.policy.state_dict().items() if v.is_floating_point()]
+        if self.deploy_net is not None:
+            avg = self.deploy_net.state_dict().items()
+            out += [(f"deployed average {k}", v) for k, v in avg if v.is_floating_point()]
         for i, st in enumerate(self.alg.optimizer.state.values()):
             out += [(f"optimiser state {k} of parameter {i}", v) for k, v in st.items() if torch.is_tensor(v)]
         return out
@@ -323,7 +350,7 @@ class Runner:
         m = self.metadata
         seed = int(m.get("seed", 0))
         current = Policy(
-            self.policy,
+            self.deployed,
             m["scene"],
             m["variant"],
             m.get("dataset_sha256", ""),
@@ -353,6 +380,7 @@ class Runner:
             "frames": self.frames,
             "seconds": self.seconds,
             "policy": self.policy.state_dict(),
+            **({} if self.deploy_net is None else {"deploy_policy": self.deploy_net.state_dict()}),
             "optimizer": self.alg.optimizer.state_dict(),
             "rng": rng_state(self.gen),
             "env": self.env.state_dict(),
@@ -379,6 +407,9 @@ class Runner:
         self._check_fits(path, state)
         with _restoring(path, "policy", "the weights of the network in the checkpoint's config"):
             self.policy.load_state_dict(state["policy"])
+        if self.deploy_net is not None:  # a checkpoint without one (written before the option): start from the latest
+            with _restoring(path, "deploy_policy", "the weights of the network in the checkpoint's config"):
+                self.deploy_net.load_state_dict(state.get("deploy_policy", state["policy"]))
         with _restoring(path, "optimizer", "the Adam state of the network in the checkpoint's config"):
             self.alg.optimizer.load_state_dict(state["optimizer"])
         with _restoring(path, "rng", "the random generator states written by `wristmimic train`"):
@@ -410,17 +441,20 @@ class Runner:
             f"{list(c.actor_hidden)}, critic {list(c.critic_hidden)}, {self.env.action_size} actions)"
         )
         model = {k: tuple(v.shape) for k, v in self.policy.state_dict().items()}
-        saved = {("log_std_param" if k == "log_std" else k): v for k, v in state["policy"].items()}
-        for key, shape in model.items():
-            if key not in saved:
-                raise InputError(path, f"policy.{key}", "missing", net)
-            if tuple(saved[key].shape) != shape:
-                raise InputError(
-                    path, f"policy.{key}", f"shape {list(saved[key].shape)}", f"shape {list(shape)} of {net}"
-                )
-        extra = sorted(set(saved) - set(model))
-        if extra:
-            raise InputError(path, f"policy.{extra[0]}", "not a weight of this network", net)
+        for entry in ("policy", "deploy_policy"):
+            if entry not in state:
+                continue
+            saved = {("log_std_param" if k == "log_std" else k): v for k, v in state[entry].items()}
+            for key, shape in model.items():
+                if key not in saved:
+                    raise InputError(path, f"{entry}.{key}", "missing", net)
+                if tuple(saved[key].shape) != shape:
+                    raise InputError(
+                        path, f"{entry}.{key}", f"shape {list(saved[key].shape)}", f"shape {list(shape)} of {net}"
+                    )
+            extra = sorted(set(saved) - set(model))
+            if extra:
+                raise InputError(path, f"{entry}.{extra[0]}", "not a weight of this network", net)
         names = {id(p): k for k, p in self.policy.named_parameters()}
         params = [p for g in self.alg.optimizer.param_groups for p in g["params"]]
         opt = state["optimizer"]
