@@ -227,7 +227,7 @@ def test_deployed_moving_average_is_what_evaluation_loads_and_resume_keeps(datas
     start_run(_spec(dataset, 3, deploy_ema=0.9), tmp_path / "run", nthread=1, progress=False)
     state = load_checkpoint(tmp_path / "run")
     latest, avg = state["policy"], state["deploy_policy"]
-    assert avg.keys() == latest.keys()
+    assert avg.keys() == latest.keys() and state["deploy"] == {"weights": "ema", "iteration": 3, "frames": 96}
     w = "actor.0.weight"
     assert not torch.equal(avg[w], latest[w])  # an average of three updates, not the last one
     p = load_eval_policy(tmp_path / "run")
@@ -249,3 +249,36 @@ def test_deployed_average_follows_the_warm_up_decay() -> None:
     assert cfg.ema_decay(1) == pytest.approx(2 / 11) and cfg.ema_decay(1000) == 0.95
     with pytest.raises(InputError, match="deploy_ema"):
         preset("cpu", deploy_ema=1.0)
+
+
+def test_deployed_best_is_the_best_periodic_evaluation_and_resumes(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rates = {1: 0.5, 2: 1.0, 3: 0.25}  # scripted evaluations: iteration 2 is the best
+    seeds: list[int] = []
+
+    def fake_eval(self: Runner) -> dict[str, float]:
+        seeds.append(self.cfg.eval_base_seed)
+        return {"eval/success_rate": rates[self.iteration]}
+
+    monkeypatch.setattr(Runner, "periodic_eval", fake_eval)
+    kw = dict(deploy_best=True, eval_every=1, eval_base_seed=12345)
+    start_run(_spec(dataset, 3, **kw), tmp_path / "run", nthread=1, progress=False)
+    assert seeds == [12345] * 3
+    state = load_checkpoint(tmp_path / "run")
+    assert state["deploy"] == {"weights": "best", "iteration": 2, "frames": 64, "eval_success_rate": 1.0}
+    start_run(_spec(dataset, 2), tmp_path / "two", nthread=1, progress=False)  # the same training, stopped at 2
+    assert _same_params(state["deploy_policy"], _params(tmp_path / "two"))
+    assert not _same_params(state["policy"], _params(tmp_path / "two"))  # training went on to iteration 3
+    p = load_policy(tmp_path / "run")
+    assert (p.weights, p.weights_iteration, p.weights_frames, p.iteration) == ("best", 2, 64, 3)
+    # a resume keeps the best found before the interruption
+    start_run(_spec(dataset, 2, **kw), tmp_path / "split", nthread=1, progress=False)
+    resume_run(tmp_path / "split", max_frames=96, nthread=1, progress=False)
+    split = load_checkpoint(tmp_path / "split")
+    assert split["deploy"] == state["deploy"] and _same_params(split["deploy_policy"], state["deploy_policy"])
+
+
+def test_deploy_best_needs_periodic_evaluation() -> None:
+    with pytest.raises(InputError, match="deploy_best"):
+        preset("cpu", deploy_best=True, eval_every=0)

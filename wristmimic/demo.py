@@ -44,6 +44,8 @@ class DemoResult:
     recording: Path
     seconds: dict[str, float]
     success_pct: float
+    deployed: str = ""
+    """Which weights were evaluated, e.g. "the best periodic evaluation's (iteration 100, 204,800 frames)"."""
 
 
 def run_demo(
@@ -87,8 +89,9 @@ def run_demo(
 
     t0 = stage(f"evaluate: {cfg.trials} trials from frame 0 (quick protocol)")
     eval_dir = out / "eval"
+    policy = load_eval_policy(run_dir)
     res = evaluate_policy(
-        load_eval_policy(run_dir),
+        policy,
         load_protocol("quick"),
         eval_dir,
         trials=cfg.trials,
@@ -107,7 +110,14 @@ def run_demo(
     recording = out / "demo.rrd"
     record_run(run_dir, recording, RunViewOptions())
     t["view"] = time.perf_counter() - t0
-    return DemoResult(dataset, run_dir, eval_dir, report_dir, recording, t, _success_pct(res))
+    return DemoResult(dataset, run_dir, eval_dir, report_dir, recording, t, _success_pct(res), deployed_text(policy))
+
+
+def deployed_text(policy: object) -> str:
+    """Which weights a loaded run deploys, in words."""
+    p = policy.policy  # type: ignore[attr-defined]
+    kind = {"best": "the best periodic evaluation's", "ema": "the moving average's", "latest": "the last update's"}
+    return f"{kind.get(p.weights, p.weights)} weights (iteration {p.weights_iteration}, {p.weights_frames:,} frames)"
 
 
 def _success_pct(res: object) -> float:

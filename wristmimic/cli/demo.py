@@ -45,7 +45,7 @@ def demo_cmd(
     took = ", ".join(f"{k} {v:.0f} s" for k, v in r.seconds.items())
     typer.echo(
         f"\ndone ({took}); the policy succeeds in {r.success_pct:.1f} % of {cfg.trials} quick-protocol trials "
-        f"after {cfg.train_frames:,} training frames."
+        f"after {cfg.train_frames:,} training frames; evaluated: {r.deployed}."
     )
     typer.echo(f"  dataset     {r.dataset}   (wristmimic inspect {r.dataset})")
     typer.echo(

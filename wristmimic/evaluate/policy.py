@@ -103,5 +103,6 @@ def load_eval_policy(run_dir_or_checkpoint: str | Path) -> RunPolicy:
         "preset": cfg.get("preset"),
         "feedforward": p.feedforward,
         "policy_weights": p.weights,
+        "policy_weights_iteration": p.weights_iteration,
     }
     return RunPolicy(p, meta)

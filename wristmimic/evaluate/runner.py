@@ -130,8 +130,13 @@ def _settings_dict(
         "noise": trials.noise,
         # the sigma of the sampled actions (mean over action dimensions; a run's ppo.deploy_std when set)
         **({"action_sigma": float(policy.sigma.mean())} if trials.noise == "actions" else {}),
-        # the deployed moving average of the weights (ppo.deploy_ema), where the run kept one
-        **({"policy_weights": "ema"} if m.get("policy_weights") == "ema" else {}),
+        # the deployed weights where they are not the last update's: a moving average (ppo.deploy_ema) or the best
+        # periodically evaluated policy (ppo.deploy_best), and their training iteration
+        **(
+            {"policy_weights": m["policy_weights"], "policy_weights_iteration": m.get("policy_weights_iteration")}
+            if m.get("policy_weights", "latest") != "latest"
+            else {}
+        ),
         "max_object_position_error_m": trials.max_obj_pos_err_m,
         "min_contact_ratio": trials.min_contact_ratio,
         "early_termination": protocol.early_termination,

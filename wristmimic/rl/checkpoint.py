@@ -166,9 +166,9 @@ def _check_state(path: Path, state: dict[str, Any]) -> None:
             raise InputError(
                 path, f"metadata.{key}", "missing" if key not in state["metadata"] else "wrong type", _EXPECTED
             )
-    for entry in ("policy", "deploy_policy"):
+    for entry in ("policy", "deploy_policy", "ema_policy"):
         weights = state.get(entry)
-        if weights is None and entry == "deploy_policy":
+        if weights is None and entry != "policy":
             continue
         if not isinstance(weights, dict):
             raise InputError(path, entry, f"holds {_kind(weights)}", "a dict of tensors")
@@ -178,6 +178,20 @@ def _check_state(path: Path, state: dict[str, Any]) -> None:
         for keys in (("normalizer.mean",), ("log_std_param", "log_std")):
             if not any(k in weights for k in keys):
                 raise InputError(path, f"{entry}.{keys[0]}", "missing", "the policy network's weights")
+
+
+def _check_deploy(path: Path, state: dict[str, Any]) -> None:
+    """The ``deploy`` record (which weights ``deploy_policy`` holds), where a checkpoint has one."""
+    deploy = state.get("deploy")
+    if deploy is None:
+        return
+    if not isinstance(deploy, dict) or deploy.get("weights") not in ("latest", "ema", "best"):
+        raise InputError(path, "deploy", "not a deployment record", "{'weights': 'latest' | 'ema' | 'best', ...}")
+    if (deploy["weights"] != "latest") != ("deploy_policy" in state):
+        raise InputError(path, "deploy_policy", f"inconsistent with deploy weights {deploy['weights']!r}", _EXPECTED)
+    for key in ("iteration", "frames"):
+        if not isinstance(deploy.get(key), int):
+            raise InputError(path, f"deploy.{key}", "missing or not an integer", _EXPECTED)
 
 
 def load_checkpoint(run_dir_or_file: str | Path) -> dict[str, Any]:
@@ -190,6 +204,7 @@ def load_checkpoint(run_dir_or_file: str | Path) -> dict[str, Any]:
     if state.get("version") != CHECKPOINT_VERSION:
         raise InputError(path, "version", f"version {state.get('version')}", f"version {CHECKPOINT_VERSION}")
     _check_state(path, state)
+    _check_deploy(path, state)
     return state
 
 

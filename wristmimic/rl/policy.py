@@ -35,7 +35,12 @@ class Policy:
     deploy_std: float = 0.0
     """``PPOConfig.deploy_std``: the sigma of sampled actions once deployed (0: the training sigma)."""
     weights: str = "latest"
-    """Which weights ``net`` holds: ``latest`` (the last update's) or ``ema`` (``PPOConfig.deploy_ema``'s average)."""
+    """Which weights ``net`` holds: ``latest`` (the last update's), ``ema`` (``PPOConfig.deploy_ema``'s average)
+    or ``best`` (``PPOConfig.deploy_best``: the best periodically evaluated policy)."""
+    weights_iteration: int = 0
+    """The training iteration of those weights (``iteration`` for the latest or the average)."""
+    weights_frames: int = 0
+    """The training frames of those weights."""
 
     @property
     def sigma(self) -> torch.Tensor:
@@ -91,6 +96,7 @@ def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
     net.load_state_dict(weights)
     net.eval()
     meta = state["metadata"]
+    deploy = state.get("deploy") or {}
     return Policy(
         net=net,
         scene_id=meta["scene"],
@@ -102,5 +108,7 @@ def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
         config=config,
         feedforward=state.get("feedforward"),
         deploy_std=ppo.deploy_std,
-        weights="ema" if "deploy_policy" in state else "latest",
+        weights=deploy.get("weights", "ema" if "deploy_policy" in state else "latest"),
+        weights_iteration=int(deploy.get("iteration", state["iteration"])),
+        weights_frames=int(deploy.get("frames", state["frames"])),
     )

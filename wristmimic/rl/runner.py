@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import dataclasses
 import json
 import math
 import signal
@@ -88,10 +89,13 @@ class Runner:
             cfg.min_log_std,
         ).to(dev)
         self.alg = PPO(self.policy, cfg)
-        self.deploy_net: ActorCritic | None = None
-        """The deployed policy: an exponential moving average of ``policy`` (``cfg.deploy_ema`` > 0), else None."""
+        self.ema_net: ActorCritic | None = None
+        """An exponential moving average of ``policy`` (``cfg.deploy_ema`` > 0), else None."""
         if cfg.deploy_ema > 0.0:
-            self.deploy_net = copy.deepcopy(self.policy).requires_grad_(False)
+            self.ema_net = copy.deepcopy(self.policy).requires_grad_(False)
+        self.best: dict[str, Any] | None = None
+        """``cfg.deploy_best``: the best periodically evaluated policy so far (``policy`` weights, ``iteration``,
+        ``frames``, ``eval_success_rate``), else None."""
         self.storage = RolloutStorage(cfg.horizon, cfg.num_envs, env.observation_size, env.action_size, dev)
         self.noise = torch.zeros(cfg.num_envs, env.action_size, device=dev)
         if cfg.noise_correlation > 0.0:  # the AR(1) process starts from its stationary (standard normal) law
@@ -151,6 +155,7 @@ class Runner:
                     terminations = sum(v for k, v in episode_row.items() if k.startswith("termination/"))
                     self.env.object_gain = self.curriculum.update(terminations, self.cfg.batch_size, self.frames)
                     evaluation = self.periodic_eval() if self._eval_due() else {}
+                    self._keep_best(evaluation)
                     self.seconds += time.perf_counter() - t0
                     row = {"iteration": self.iteration, "frames": self.frames, "seconds": self.seconds}
                     row |= {"frames_per_s": self.cfg.batch_size / dt, **episode_row, **losses}
@@ -182,20 +187,39 @@ class Runner:
     @torch.no_grad()
     def _average_deployed(self, updates: int) -> None:
         """Move the deployed average toward the latest weights (``cfg.deploy_ema``; nothing when off)."""
-        if self.deploy_net is None:
+        if self.ema_net is None:
             return
         w = 1.0 - self.cfg.ema_decay(updates)
         latest = self.policy.state_dict()
-        for key, avg in self.deploy_net.state_dict().items():
+        for key, avg in self.ema_net.state_dict().items():
             if avg.is_floating_point():
                 avg.lerp_(latest[key], w)
             else:
                 avg.copy_(latest[key])
 
     @property
-    def deployed(self) -> ActorCritic:
-        """The network evaluation deploys: the moving average when ``cfg.deploy_ema`` > 0, else the latest."""
-        return self.policy if self.deploy_net is None else self.deploy_net
+    def candidate(self) -> ActorCritic:
+        """The network the periodic evaluation tries: the moving average when ``cfg.deploy_ema`` > 0, else the
+        latest weights."""
+        return self.policy if self.ema_net is None else self.ema_net
+
+    def _keep_best(self, evaluation: dict[str, float]) -> None:
+        """``cfg.deploy_best``: keep the evaluated candidate if it succeeds at least as often as the best so far."""
+        rate = evaluation.get("eval/success_rate")
+        if not self.cfg.deploy_best or rate is None or (self.best and rate < self.best["eval_success_rate"]):
+            return
+        weights = {k: v.detach().clone() for k, v in self.candidate.state_dict().items()}
+        self.best = {"policy": weights, "iteration": self.iteration, "frames": self.frames, "eval_success_rate": rate}
+
+    def deployment(self) -> tuple[dict[str, torch.Tensor] | None, dict[str, Any]]:
+        """The weights evaluation, ``view`` and ``export`` load (None: the latest) and what they are: ``weights``
+        (``latest``, ``ema`` or ``best``), ``iteration``, ``frames`` (and the best's ``eval_success_rate``)."""
+        if self.best is not None:
+            return self.best["policy"], {k: v for k, v in self.best.items() if k != "policy"} | {"weights": "best"}
+        info = {"iteration": self.iteration, "frames": self.frames}
+        if self.ema_net is not None:
+            return self.ema_net.state_dict(), info | {"weights": "ema"}
+        return None, info | {"weights": "latest"}
 
     def _checkpoint_due(self) -> bool:
         c = self.cfg
@@ -233,9 +257,11 @@ class Runner:
     def _state_tensors(self) -> list[tuple[str, torch.Tensor]]:
         """The learned state a checkpoint saves: parameters, normaliser buffers and optimiser moments."""
         out = [(f"policy parameter {k}", v) for k, v in self.policy.state_dict().items() if v.is_floating_point()]
-        if self.deploy_net is not None:
-            avg = self.deploy_net.state_dict().items()
-            out += [(f"deployed average {k}", v) for k, v in avg if v.is_floating_point()]
+        if self.ema_net is not None:
+            avg = self.ema_net.state_dict().items()
+            out += [(f"moving average {k}", v) for k, v in avg if v.is_floating_point()]
+        if self.best is not None:
+            out += [(f"best policy {k}", v) for k, v in self.best["policy"].items() if v.is_floating_point()]
         for i, st in enumerate(self.alg.optimizer.state.values()):
             out += [(f"optimiser state {k} of parameter {i}", v) for k, v in st.items() if torch.is_tensor(v)]
         return out
@@ -350,7 +376,7 @@ class Runner:
         m = self.metadata
         seed = int(m.get("seed", 0))
         current = Policy(
-            self.deployed,
+            self.candidate,
             m["scene"],
             m["variant"],
             m.get("dataset_sha256", ""),
@@ -360,6 +386,8 @@ class Runner:
             {},
             deploy_std=self.cfg.deploy_std,
         )
+        if self.cfg.eval_base_seed is not None:
+            settings = dataclasses.replace(settings, base_seed=self.cfg.eval_base_seed)
         run_trials(self._eval_env, RunPolicy(current, {}), settings, 0, self.cfg.eval_trials, records.append)
         col = {
             k: np.concatenate([r[k] for r in records])
@@ -374,13 +402,20 @@ class Runner:
 
     # -- checkpoints ---------------------------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
-        """Everything a bit-for-bit resume needs; only tensors, plain containers and JSON text."""
-        return {
+        """Everything a bit-for-bit resume needs; only tensors, plain containers and JSON text.
+
+        ``deploy_policy`` (absent: deploy ``policy``) and ``deploy`` say which weights are deployed."""
+        weights, deploy = self.deployment()
+        extra: dict[str, Any] = {"deploy": deploy}
+        if weights is not None:
+            extra["deploy_policy"] = weights
+        if self.ema_net is not None:
+            extra["ema_policy"] = self.ema_net.state_dict()
+        return extra | {
             "iteration": self.iteration,
             "frames": self.frames,
             "seconds": self.seconds,
             "policy": self.policy.state_dict(),
-            **({} if self.deploy_net is None else {"deploy_policy": self.deploy_net.state_dict()}),
             "optimizer": self.alg.optimizer.state_dict(),
             "rng": rng_state(self.gen),
             "env": self.env.state_dict(),
@@ -407,9 +442,13 @@ class Runner:
         self._check_fits(path, state)
         with _restoring(path, "policy", "the weights of the network in the checkpoint's config"):
             self.policy.load_state_dict(state["policy"])
-        if self.deploy_net is not None:  # a checkpoint without one (written before the option): start from the latest
-            with _restoring(path, "deploy_policy", "the weights of the network in the checkpoint's config"):
-                self.deploy_net.load_state_dict(state.get("deploy_policy", state["policy"]))
+        if self.ema_net is not None:  # a checkpoint without one (written before the option): start from the latest
+            with _restoring(path, "ema_policy", "the weights of the network in the checkpoint's config"):
+                self.ema_net.load_state_dict(state.get("ema_policy", state["policy"]))
+        deploy = state.get("deploy") or {}
+        if self.cfg.deploy_best and deploy.get("weights") == "best":
+            self.best = {k: deploy[k] for k in ("iteration", "frames", "eval_success_rate")}
+            self.best["policy"] = {k: v.clone() for k, v in state["deploy_policy"].items()}
         with _restoring(path, "optimizer", "the Adam state of the network in the checkpoint's config"):
             self.alg.optimizer.load_state_dict(state["optimizer"])
         with _restoring(path, "rng", "the random generator states written by `wristmimic train`"):
@@ -441,7 +480,7 @@ class Runner:
             f"{list(c.actor_hidden)}, critic {list(c.critic_hidden)}, {self.env.action_size} actions)"
         )
         model = {k: tuple(v.shape) for k, v in self.policy.state_dict().items()}
-        for entry in ("policy", "deploy_policy"):
+        for entry in ("policy", "deploy_policy", "ema_policy"):
             if entry not in state:
                 continue
             saved = {("log_std_param" if k == "log_std" else k): v for k, v in state[entry].items()}
