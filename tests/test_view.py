@@ -512,10 +512,48 @@ def test_view_an_exported_sequence_beside_its_reference(files, tmp_path: Path) -
     legend = series_names(rec)
     assert all(len(x) <= LEGEND_CHARS and not x.endswith("~") for x in legend.values()), legend  # none cut
     views = blueprint_views(out)
-    assert views["penetration and hand gap (m)"]["TimeAxis:view_range"] == [{"start": 0, "end": 19}]
+    assert views["hand-obj (m)"]["TimeAxis:view_range"] == [{"start": 0, "end": 19}]
     assert "reward" not in views and "contact and phase" in views  # no empty reward view: an export has none
     if n < 20:  # the tiny policy's episode ended early
         assert rec.temporal("/sim", "Clear:is_recursive")[0].tolist() == [n]
     assert seq in rec.static("/info", "TextDocument:text")[0]
     r = runner.invoke(app, ["view", str(sim_h5), "-s", seq, "--frames", "3", "-o", str(tmp_path / "x.rrd")])
     assert r.exit_code == 1 and "--frames" in r.output
+
+
+def test_plausibility_views_show_every_legend_name_in_distinct_colours(files, tmp_path: Path) -> None:
+    """Every plausibility metric is in exactly one tab of at most 4 series (2 metrics x ref/sim: a tab of 8 showed
+    only 4 legend names at a 900-pixel window); within a tab no two series share a colour, the reference series
+    are warm (red over blue) and the simulated ones cool, as the contact series are."""
+    from wristmimic.plausibility import plausibility_series
+    from wristmimic.view.blueprint import PLAUSIBILITY_VIEWS
+    from wristmimic.view.record import write_recording
+    from wristmimic.view.tracks import reference_from_dataset
+
+    path, sid = files["smplx"]
+    with open_dataset(path) as ds:
+        ref = reference_from_dataset(ds, sid, None)
+        series = plausibility_series(ds, sid)
+    out = tmp_path / "plaus.rrd"
+    write_recording(out, ref, [[] for _ in range(ref.body_pos.shape[1])], plausibility={"ref": series, "sim": series})
+    rec = Recording(out)
+    logged = {p for p in rec.paths if p.startswith("/metrics/plausibility/")}
+    assert logged == {f"/metrics/plausibility/{m}/{src}" for m in series for src in ("ref", "sim")}
+    prefix = "/metrics/plausibility/"
+    views = {
+        name: [q.removesuffix("/**") + "/" for q in v["ViewContents:query"]]
+        for name, v in blueprint_views(out).items()
+        if any(q.startswith(prefix) for q in v.get("ViewContents:query", []))
+    }
+    assert set(views) == set(PLAUSIBILITY_VIEWS)
+    shown: list[str] = []
+    for name, queries in views.items():
+        paths = sorted(p for p in logged if any(p.startswith(q) for q in queries))
+        assert 1 <= len(paths) <= 4, (name, paths)
+        colors = {p: rec.static(p, "SeriesLines:colors")[0] for p in paths}
+        assert len(set(colors.values())) == len(paths), (name, colors)  # no two series of a tab alike
+        for p, c in colors.items():
+            red, blue = c >> 24, (c >> 8) & 0xFF
+            assert (red > blue) if p.endswith("/ref") else (blue > red), (p, hex(c))
+        shown += paths
+    assert sorted(shown) == sorted(logged)  # each series in exactly one tab

@@ -9,17 +9,16 @@ POSITION_ERRORS = ["/metrics/error/object_pos/**", "/metrics/error/wrist_pos/**"
 ROTATION_ERRORS = ["/metrics/error/object_rot/**", "/metrics/error/wrist_rot/**"]
 CONTACT_AND_PHASE = ["/metrics/contact/**", "/metrics/phase"]
 PLAUSIBILITY_VIEWS = {
-    "penetration and hand gap (m)": [
-        "hand_object_depth_m",
-        "body_floor_depth_m",
-        "object_support_depth_m",
-        "hand_gap_m",
-    ],
+    "hand-obj (m)": ["hand_object_depth_m", "hand_gap_m"],
+    "floor, supp (m)": ["body_floor_depth_m", "object_support_depth_m"],
     "feet (m, m/s)": ["foot_height_m", "foot_skate_speed_m_s"],
     "jerk (m/s^3)": ["body_jerk_m_s3", "object_jerk_m_s3"],
-    "floating objects": ["object_float"],
+    "floating": ["object_float"],
 }
-"""Plausibility metrics (``/metrics/plausibility/<metric>/**``) per view."""
+"""Plausibility metrics (``/metrics/plausibility/<metric>/**``) per view: at most 2 metrics (4 series, reference
+and simulation), so that a legend shows every name at a 900-pixel window (a view of 8 series showed 4 of them);
+within a view the first metric is drawn orange (reference) / blue (simulation), the second brown / cyan
+(:func:`wristmimic.view.record.plausibility_color`)."""
 
 
 def clip_axis(num_frames: int | None) -> rrb.TimeAxis | None:

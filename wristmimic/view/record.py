@@ -49,7 +49,7 @@ from wristmimic.format.validate import check_sequence
 from wristmimic.humanoid.skeleton import load_skeleton
 from wristmimic.rotations import quat_angle, wxyz_to_xyzw
 from wristmimic.safe_io import atomic_output
-from wristmimic.view.blueprint import make_blueprint
+from wristmimic.view.blueprint import PLAUSIBILITY_VIEWS, make_blueprint
 from wristmimic.view.geometry import Color, GeomShape, entity_part, geom_archetype, humanoid_geoms, mesh_archetype
 from wristmimic.view.rollout import Actor, run_rollout
 from wristmimic.view.tracks import ObjectTrack, ReferenceTrack, SimTrack, reference_from_dataset, reference_from_env
@@ -495,18 +495,32 @@ PLAUSIBILITY_NAMES = {
 """Legend names of :func:`wristmimic.plausibility.plausibility_series`' metrics (the path keeps the full name)."""
 
 
+def plausibility_color(metric: str, src: str) -> Color:
+    """The colour of a plausibility series: by the metric's place in its view (:data:`PLAUSIBILITY_VIEWS`) and
+    the source, as the contact series are coloured: the first metric of a view orange (``ref``) / blue (``sim``),
+    the second brown / cyan; grey for a metric no view shows or another source."""
+    place = next((ms.index(metric) for ms in PLAUSIBILITY_VIEWS.values() if metric in ms), None)
+    colors = {
+        "ref": (PALETTE.ref_left, PALETTE.ref_right),
+        "sim": (PALETTE.sim_left, PALETTE.sim_right),
+    }
+    if place is None or src not in colors:
+        return PALETTE.unknown
+    return colors[src][place % 2]
+
+
 def _log_plausibility(
     rec: rr.RecordingStream, ref: ReferenceTrack, sim: SimTrack | None, series: dict[str, dict[str, np.ndarray]]
 ) -> None:
-    """``/metrics/plausibility/<metric>/<src>``: reference (orange) and simulation (blue) per frame."""
-    colors = {"ref": PALETTE.ref_body, "sim": PALETTE.sim_body}
+    """``/metrics/plausibility/<metric>/<src>`` per frame, coloured by :func:`plausibility_color` (reference warm,
+    simulation cool, the two metrics of a view apart)."""
     start = 0 if sim is None else int(sim.frames[0])
     for src, metrics in series.items():
         for metric, values in metrics.items():
             frames = np.arange(len(values)) + (start if src == "sim" else 0)
             name = f"{PLAUSIBILITY_NAMES.get(metric, metric)} {src}"
             path = f"/metrics/plausibility/{metric}/{src}"
-            _log_series(rec, path, frames, ref.fps, values, name, colors.get(src, PALETTE.unknown))
+            _log_series(rec, path, frames, ref.fps, values, name, plausibility_color(metric, src))
 
 
 def _log_events(rec: rr.RecordingStream, ref: ReferenceTrack, window: WindowConfig, sim: SimTrack | None) -> None:
