@@ -6,8 +6,10 @@ humanoid facing +x, a table whose near edge is ``table_gap`` in front of the ank
 Targets are keyframed and interpolated with minimum-jerk time scaling (``s = 10 tau^3 - 15 tau^4 + 6 tau^5``:
 zero velocity and acceleration at both ends of every phase):
 
-- the box: on the table -> lifted (``lift`` up, ``carry`` towards the body) -> optionally turned about the
-  vertical (``turn_deg``, the pelvis following ``pelvis_follow`` of it) -> back down onto the table;
+- the box: on the table -> lifted (``lift`` up, ``carry`` towards the body) -> optionally turned (``turn_deg``)
+  about the vertical through its centre (``turn_axis`` 'z', the pelvis following ``pelvis_follow`` of it) or
+  about its width axis through the two palms (``turn_axis`` 'y': the hands stay in place and roll with the
+  faces they hold) -> back down onto the table (after a 90 deg turn about 'y': on its back or front face);
 - the hands: rest (arms hanging, from the standing solution) -> pre-grasp, ``pregrasp_gap`` off the box's two
   side faces -> palms on the faces (``press`` into them) -> rigidly attached to the box while it is held ->
   back off the faces -> rest. Reach and retract follow a joint-space path (a quadratic Bezier through a
@@ -50,6 +52,11 @@ def _rz(yaw: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+def _ry(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
 def _slerp(Ra: np.ndarray, Rb: np.ndarray, s: float) -> np.ndarray:
     """Rotation between Ra (s = 0) and Rb (s = 1) along the shortest arc."""
     from wristmimic.rotations import quat_to_rotvec, rotvec_to_quat
@@ -87,12 +94,18 @@ class MotionSpec:
     put_down_shift: float = 0.0
     """The box is put down this far along x from where it was picked up (< 0: nearer the humanoid)."""
     turn_deg: float = 0.0
-    """Yaw of the box about its vertical axis while lifted (the 'turn' phase); 0: no turn phase."""
+    """Rotation of the box while lifted (the 'turn' phase, about ``turn_axis``, right-handed); 0: no turn."""
+    turn_axis: str = "z"
+    """'z': yaw about the box's vertical axis through its centre (with the hands on the side faces, one hand
+    ends on the far face and its forearm crosses the box for turns near 90 deg); 'y': about the box's width axis
+    through the two palms (the hands stay where they are and roll with their faces; 90 deg puts the box down on
+    its back face (< 0: front up) or its front face (> 0: front down))."""
     pelvis_follow: float = 0.4
-    """Fraction of the box's turn the pelvis yaw follows."""
+    """Fraction of the box's yaw (``turn_axis`` 'z') the pelvis yaw follows."""
     arm_clearance: bool = True
-    """Keep the upper arms and forearms out of the box (an IK task; off along the reach's joint-space arc). The
-    turn variant turns it off: with the hands on the faces they held, one forearm must cross the turned box."""
+    """Keep the upper arms and forearms out of the box (an IK task; off along the reach's joint-space arc)."""
+    clearance_margin: float | None = None
+    """Wanted gap (m) of that task; None: :class:`~wristmimic.synth.ik.IKWeights`' default."""
     finger_pitch_deg: float = 20.0
     """Fingers point forward and this much down along the side faces."""
     press: float = 0.003
@@ -101,6 +114,9 @@ class MotionSpec:
     """Palm to face distance before the grasp and after the release."""
     face_margin: float = 0.02
     """The hand stays this far inside the front and bottom edges of the face it holds."""
+    grip: tuple[float, float] = (0.0, 0.0)
+    """Wanted palm point on the face (box x, z from the face centre); moved as little as needed to keep the
+    whole hand on the face."""
     via_height: float = 0.12
     """Half-way through a reach the palms pass this far above the table top (or the pre-grasp, if higher) ..."""
     via_ahead: float = -0.10
@@ -123,6 +139,9 @@ class MotionSpec:
     """Gauss-Newton iterations per frame (warm-started from the frame before)."""
     path_weight: float = 1.0
     """Pull (1/rad) of every hinge towards the joint-space path in the middle of reach and retract."""
+    retract_pull: float = 0.0
+    """Least pull (1/rad) towards the retract's path, from its first frame: where the released hands could not
+    reach their targets, it keeps the posture regularisation from snapping the arms once the hands are free."""
 
     def phase_list(self) -> list[tuple[str, int, int]]:
         """[(phase, first frame, frame count)] for the phases with frames, in order."""
@@ -213,10 +232,10 @@ def hand_in_box(spec: MotionSpec, humanoid: SynthHumanoid, side: str, gap: float
     # keep the whole hand on the face: fingertips short of the front edge, the lowest finger above the bottom
     pts, rad = humanoid.hand_points[side]
     rel = (pts - humanoid.palm_point[side]) @ R.T  # hand points relative to the palm point, box axes
-    x_off = min(0.0, dx / 2 - spec.face_margin - float((rel[:, 0] + rad).max()))
+    x_off = min(spec.grip[0], dx / 2 - spec.face_margin - float((rel[:, 0] + rad).max()))
     z_lo = -dz / 2 + spec.face_margin - float((rel[:, 2] - rad).min())
     z_hi = dz / 2 - float((rel[:, 2] + rad).max())
-    z_off = z_lo if z_lo > z_hi else float(np.clip(0.0, z_lo, z_hi))
+    z_off = z_lo if z_lo > z_hi else float(np.clip(spec.grip[1], z_lo, z_hi))
     return np.array([x_off, s * (dy / 2 + gap), z_off]), R
 
 
@@ -246,6 +265,8 @@ def generate_motion(
     skel: Skeleton, humanoid: SynthHumanoid, spec: MotionSpec, weights: IKWeights | None = None
 ) -> Motion:
     """Solve the whole sequence (see the module docstring)."""
+    if weights is None and spec.clearance_margin is not None:
+        weights = replace(IKWeights(), clearance_margin=float(spec.clearance_margin))
     ik = WholeBodyIK(skel, humanoid, weights)
     lay = layout(spec, humanoid)
     tl = _Timeline(spec)
@@ -253,12 +274,35 @@ def generate_motion(
     box_mass = float(np.prod(spec.box_size) * spec.box_density)
     com_xy = np.array([spec.com_ahead, 0.0])
     feet_pos, feet_mat = lay.ankles, {s: np.eye(3) for s, _ in SIDES}
-    yaw_end = lay.yaw0 + (np.deg2rad(spec.turn_deg) if spec.frames.get("turn", 0) > 0 else 0.0)
+    if spec.turn_axis not in ("z", "y"):
+        raise ValueError(f"turn_axis {spec.turn_axis!r}: 'z' or 'y'")
+    turn = np.deg2rad(spec.turn_deg) if spec.frames.get("turn", 0) > 0 else 0.0
+    tilt = spec.turn_axis == "y" and turn != 0.0
+    yaw_end = lay.yaw0 + (0.0 if tilt else turn)
     lifted = lay.box_rest + np.array([-spec.carry, 0.0, spec.lift])
     down = lay.box_rest + np.array([spec.put_down_shift, 0.0, 0.0])
+    R0 = _rz(lay.yaw0)
+    if tilt:  # turn about the width axis through the palms: the palm midpoint (box frame) stays where it is
+        pivot = 0.5 * sum(hand_in_box(spec, humanoid, side, 0.0)[0] for side, _ in SIDES)
+        R_end = _ry(turn)
+        lifted_end = lifted + R0 @ (pivot - R_end @ pivot)
+        half_z = float(np.abs(R_end[2]) @ (np.asarray(spec.box_size) / 2))  # the turned box's half height
+        down = np.array([lifted_end[0] + spec.put_down_shift, lifted_end[1], spec.table_height + half_z])
 
-    def box_pose(phase: str, s: float) -> tuple[np.ndarray, float]:
-        """Box centre and yaw: on the table, lifted, turned, back down."""
+    def box_pose(phase: str, s: float) -> tuple[np.ndarray, float, np.ndarray]:
+        """Box centre, yaw and rotation: on the table, lifted, turned, back down."""
+        if not tilt or PHASES.index(phase) < PHASES.index("turn"):
+            p, yaw = _box_yaw(phase, s)
+            return p, yaw, _rz(yaw)
+        if phase == "turn":
+            Rt = _ry(s * turn)
+            return lifted + R0 @ (pivot - Rt @ pivot), lay.yaw0, R0 @ Rt
+        if phase == "put_down":
+            return lifted_end + s * (down - lifted_end), lay.yaw0, R0 @ R_end
+        return down, lay.yaw0, R0 @ R_end
+
+    def _box_yaw(phase: str, s: float) -> tuple[np.ndarray, float]:
+        """Box centre and yaw of a turn about the vertical (or none)."""
         if PHASES.index(phase) < PHASES.index("lift"):
             return lay.box_rest, lay.yaw0
         if phase == "lift":
@@ -271,9 +315,8 @@ def generate_motion(
             return lifted + s * (down - lifted), yaw_end
         return down, yaw_end
 
-    def on_box(box_p: np.ndarray, yaw: float, gap: float) -> tuple[dict, dict]:
+    def on_box(box_p: np.ndarray, Rb: np.ndarray, gap: float) -> tuple[dict, dict]:
         """Palm targets and wrist rotations of both hands, ``gap`` off the side faces of the box."""
-        Rb = _rz(yaw)
         pos, mat = {}, {}
         for side, _ in SIDES:
             p_l, R_l = hand_in_box(spec, humanoid, side, gap)
@@ -281,7 +324,7 @@ def generate_motion(
         return pos, mat
 
     def targets(
-        hands_pos, hands_mat, box_p, yaw, load: float, twist: float = 0.0, clear: bool = True
+        hands_pos, hands_mat, box_p, yaw, load: float, twist: float = 0.0, clear: bool = True, Rb=None
     ) -> FrameTargets:
         """Targets of one frame; ``twist`` (0..1): how much of the box's turn the pelvis follows; ``clear``: keep
         the arms out of the box (off along the joint-space arcs of reach and retract, which pass over it)."""
@@ -294,7 +337,7 @@ def generate_motion(
             held_mass=box_mass * load,
             held_pos=box_p,
             pelvis_yaw=twist * spec.pelvis_follow * (yaw - lay.yaw0),
-            obstacle=(box_p, _rz(yaw), np.asarray(spec.box_size, dtype=float) / 2)
+            obstacle=(box_p, _rz(yaw) if Rb is None else Rb, np.asarray(spec.box_size, dtype=float) / 2)
             if clear and spec.arm_clearance
             else None,
         )
@@ -308,7 +351,7 @@ def generate_motion(
 
     def pose_at(box_p: np.ndarray, yaw: float, q0: np.ndarray, gap: float, load: float = 0.0) -> np.ndarray:
         """IK posture with the hands ``gap`` off the box, reached by continuation from ``q0``'s hands."""
-        pos, mat = on_box(box_p, yaw, gap)
+        pos, mat = on_box(box_p, _rz(yaw), gap)
         ik.forward(q0)
         start = {s: ik.palm_world(s) for s, _ in SIDES}
         q = q0
@@ -319,9 +362,9 @@ def generate_motion(
             q = ik.solve(q, targets(hp, hm, box_p, yaw, load), 40)
         return ik.solve(q, targets(pos, mat, box_p, yaw, load), 200)
 
-    def via_pose(box_p: np.ndarray, yaw: float, q0: np.ndarray) -> np.ndarray:
+    def via_pose(box_p: np.ndarray, yaw: float, Rb: np.ndarray, q0: np.ndarray) -> np.ndarray:
         """Posture half-way through a reach: hands above the table's near edge, fingers pointing forward-up."""
-        pos, mat = on_box(box_p, yaw, spec.pregrasp_gap)
+        pos, mat = on_box(box_p, Rb, spec.pregrasp_gap)
         ik.forward(q0)
         start = {s: ik.palm_world(s) for s, _ in SIDES}
         edge = lay.table_pos[0] - spec.table_size[0] / 2
@@ -336,14 +379,14 @@ def generate_motion(
             u = k / 20
             hp = {s: start[s][0] + u * (vp[s] - start[s][0]) for s in pos}
             hm = {s: _slerp(start[s][1], vm[s], u) for s in pos}
-            q = ik.solve(q, targets(hp, hm, box_p, yaw, 0.0), 40)
+            q = ik.solve(q, targets(hp, hm, box_p, yaw, 0.0, Rb=Rb), 40)
         return q
 
     q_pre = pose_at(lay.box_rest, lay.yaw0, q_rest, spec.pregrasp_gap)
-    q_via = via_pose(lay.box_rest, lay.yaw0, q_rest)
+    q_via = via_pose(lay.box_rest, lay.yaw0, _rz(lay.yaw0), q_rest)
 
     qs = np.zeros((T, ik.model.nq))
-    box_pos, box_yaw = np.zeros((T, 3)), np.zeros(T)
+    box_pos, box_yaw, box_mat = np.zeros((T, 3)), np.zeros(T), np.zeros((T, 3, 3))
     closure, held = np.zeros(T), np.zeros(T, dtype=bool)
     htgt = np.full((T, 2, 3), np.nan)
     res: dict[str, np.ndarray] = {}
@@ -352,7 +395,7 @@ def generate_motion(
     for t in range(T):
         phase, tau = tl.at(t)
         s_ = float(min_jerk(tau))
-        bp, yaw = box_pose(phase, s_)
+        bp, yaw, Rb = box_pose(phase, s_)
         is_held = phase in HELD
         load = 0.0  # the box's weight moves to the hands early in the lift and back to the table late in put-down
         if phase == "lift":
@@ -366,7 +409,7 @@ def generate_motion(
                 qa, qv, qb = q_rest, q_via, q_pre
             else:
                 if q_back is None:
-                    q_back = via_pose(bp, yaw, q_release)
+                    q_back = via_pose(bp, yaw, Rb, q_release)
                 qa, qv, qb = q_release, q_back, q_rest
             # the hands follow the joint-space path's palms (arcs like a human reach), the posture is pulled
             # towards the path in the middle of the phase only, so both ends match the neighbouring phases
@@ -375,8 +418,11 @@ def generate_motion(
             palms = {side: ik.palm_world(side) for side, _ in SIDES}
             untwist = 0.0 if phase == "reach" else 1.0 - s_  # the pelvis turns back with the retract
             hp, hm = {k: v[0] for k, v in palms.items()}, {k: v[1] for k, v in palms.items()}
-            tgt = targets(hp, hm, bp, yaw, 0.0, twist=untwist, clear=phase == "retract")
-            q = ik.solve(q, tgt, spec.ik_iterations, track=(qj, 4.0 * s_ * (1.0 - s_) * spec.path_weight))
+            tgt = targets(hp, hm, bp, yaw, 0.0, twist=untwist, clear=phase == "retract", Rb=Rb)
+            pull = 4.0 * s_ * (1.0 - s_) * spec.path_weight
+            if phase == "retract" and spec.retract_pull > 0.0:
+                pull = max(pull, spec.retract_pull)
+            q = ik.solve(q, tgt, spec.ik_iterations, track=(qj, pull))
         else:
             if phase in ("stand", "rest"):
                 hp, hm = rest_pos, rest_mat
@@ -386,8 +432,8 @@ def generate_motion(
                     gap = spec.pregrasp_gap + s_ * (-spec.press - spec.pregrasp_gap)
                 elif phase == "release":
                     gap = -spec.press + s_ * (spec.pregrasp_gap + spec.press)
-                hp, hm = on_box(bp, yaw, gap)
-            tgt = targets(hp, hm, bp, yaw, load, twist=0.0 if phase in ("stand", "rest") else 1.0)
+                hp, hm = on_box(bp, Rb, gap)
+            tgt = targets(hp, hm, bp, yaw, load, twist=0.0 if phase in ("stand", "rest") else 1.0, Rb=Rb)
             q = ik.solve(q, tgt, spec.ik_iterations)
             htgt[t] = [hp["L"], hp["R"]]
             if phase == "release":
@@ -395,7 +441,7 @@ def generate_motion(
         qs[t] = q
         for k, v in ik.residuals(tgt).items():
             res.setdefault(k, np.full(T, np.nan))[t] = v
-        box_pos[t], box_yaw[t], held[t] = bp, yaw, is_held
+        box_pos[t], box_yaw[t], box_mat[t], held[t] = bp, yaw, Rb, is_held
         if phase == "grasp":
             closure[t] = float(min_jerk((tau - 0.3) / 0.7))
         elif phase == "release":
@@ -408,6 +454,8 @@ def generate_motion(
         qs[:, skel.hinge_qposadr[j]] = closure[:, None] * ang[None]
     half = 0.5 * box_yaw
     box_quat = np.stack([np.cos(half), np.zeros(T), np.zeros(T), np.sin(half)], axis=-1)
+    if tilt:  # a turn about the width axis: the quaternion of the full rotation (w >= 0)
+        box_quat = matrix_to_quat(box_mat)
     return Motion(
         qpos=qs,
         box_pos=box_pos,
