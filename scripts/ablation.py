@@ -1,7 +1,8 @@
 """Ablation of the CPU training recipe: one row per lever, every row at the same frame budget and seed.
 
 Usage:  python scripts/ablation.py DATASET.h5 --scene synth_default --frames 300000 -o reports/ablation_synth_default
-        [--rows recipe,absolute,fixed_ppo,no_curriculum,uniform_starts,training_sigma,sigma_anneal] [--trials 256]
+        [--rows recipe,latest_weights,absolute,fixed_ppo,no_curriculum,uniform_starts,training_sigma,sigma_anneal]
+        [--trials 256]
         [--seed 0]
 
 Each row trains with ``wristmimic.rl.start_run`` (the ``cpu`` preset with one lever changed) and is evaluated
@@ -47,7 +48,8 @@ ROWS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
         {"starts": StartSamplingConfig(adaptive=False)},
         {},
     ),
-    "training_sigma": ("deployed with the training sigma (~0.1) instead of 0.003", {}, {"deploy_std": 0.0}),
+    "latest_weights": ("the recipe's run, deploying its last update instead of the best periodic evaluation", {}, {}),
+    "training_sigma": ("the recipe's run, deployed with the training sigma (~0.1) instead of 0.003", {}, {}),
     "sigma_anneal": (
         "training sigma annealed 0.1 -> 0.003 over the first 250k frames (not learned)",
         {},
@@ -56,17 +58,32 @@ ROWS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
 }
 
 
+EVAL_ONLY: dict[str, tuple[str, str, float | None]] = {
+    "latest_weights": ("recipe", "latest", None),
+    "training_sigma": ("recipe", "deployed", 0.0),
+}
+"""Rows that train nothing: they evaluate another row's run with other weights (``load_eval_policy(weights=)``) or
+another sigma of the sampled actions (0: the training sigma)."""
+
+
 def run_row(name: str, dataset: Path, scene: str, frames: int, seed: int, trials: int, work: Path) -> dict[str, Any]:
     what, env_kw, ppo_kw = ROWS[name]
     env = replace(preset_env("cpu", "wristmimic"), **env_kw)
     ppo = replace(preset("cpu"), max_frames=frames, **ppo_kw)
-    run_dir, eval_dir = work / name / "run", work / name / "eval"
+    source, weights, sigma = EVAL_ONLY.get(name, (name, "deployed", None))
+    if source != name and not (work / source / "run" / "checkpoint.pt").is_file():
+        run_row(source, dataset, scene, frames, seed, trials, work)
+    run_dir, eval_dir = work / source / "run", work / name / "eval"
     t0 = time.perf_counter()
     if not (eval_dir / "summary.json").is_file():
-        if run_dir.exists():
-            shutil.rmtree(run_dir)
-        start_run(TrainSpec(dataset, scene, "wristmimic", seed, "cpu", ppo, env=env), run_dir, progress=False)
-        evaluate_policy(load_eval_policy(run_dir), load_protocol("quick"), eval_dir, trials=trials, progress=False)
+        if source == name:
+            if run_dir.exists():
+                shutil.rmtree(run_dir)
+            start_run(TrainSpec(dataset, scene, "wristmimic", seed, "cpu", ppo, env=env), run_dir, progress=False)
+        policy = load_eval_policy(run_dir, weights)
+        if sigma is not None:
+            policy.policy.deploy_std = sigma
+        evaluate_policy(policy, load_protocol("quick"), eval_dir, trials=trials, progress=False)
     s = json.loads((eval_dir / "summary.json").read_text())["scenes"][0]
     lo, hi = float(s["success_ci_low"]), float(s["success_ci_high"])
     m = pd.read_csv(run_dir / "metrics.csv")
@@ -111,8 +128,10 @@ def main() -> None:
         print(json.dumps(table[-1]), flush=True)
         keep = args.out / name
         keep.mkdir(parents=True, exist_ok=True)
+        run_of = EVAL_ONLY.get(name, (name,))[0]
         for src in ("run/config.json", "run/metrics.csv", "eval/summary.json"):
-            shutil.copyfile(args.work / name / src, keep / Path(src).name)
+            folder = run_of if src.startswith("run/") else name
+            shutil.copyfile(args.work / folder / src, keep / Path(src).name)
     df = pd.DataFrame(table)
     args.out.mkdir(parents=True, exist_ok=True)
     with atomic_output(args.out / "ablation.csv") as tmp:

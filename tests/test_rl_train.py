@@ -282,3 +282,62 @@ def test_deployed_best_is_the_best_periodic_evaluation_and_resumes(
 def test_deploy_best_needs_periodic_evaluation() -> None:
     with pytest.raises(InputError, match="deploy_best"):
         preset("cpu", deploy_best=True, eval_every=0)
+
+
+def test_evaluate_weights_option_loads_the_latest_or_the_deployed(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(
+        Runner, "periodic_eval", lambda self: {"eval/success_rate": 1.0 if self.iteration == 1 else 0.0}
+    )
+    start_run(_spec(dataset, 2, deploy_best=True, eval_every=1), tmp_path / "run", nthread=1, progress=False)
+    state = load_checkpoint(tmp_path / "run")
+    best, latest = load_policy(tmp_path / "run"), load_policy(tmp_path / "run", weights="latest")
+    assert (best.weights, best.weights_iteration, latest.weights, latest.weights_iteration) == ("best", 1, "latest", 2)
+    assert _same_params(latest.net.state_dict(), state["policy"])
+    assert _same_params(best.net.state_dict(), state["deploy_policy"])
+    with pytest.raises(InputError, match="weights"):
+        load_policy(tmp_path / "run", weights="newest")
+    res = CliRunner().invoke(
+        app,
+        [
+            "evaluate",
+            str(tmp_path / "run"),
+            "-p",
+            "quick",
+            "-n",
+            "2",
+            "--num-envs",
+            "2",
+            "--nthread",
+            "1",
+            "-q",
+            "--weights",
+            "latest",
+            "-o",
+            str(tmp_path / "ev"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    assert "policy_weights" not in json.loads((tmp_path / "ev" / "eval.json").read_text())
+    res = CliRunner().invoke(
+        app,
+        [
+            "evaluate",
+            str(tmp_path / "run"),
+            "-p",
+            "quick",
+            "-n",
+            "2",
+            "--num-envs",
+            "2",
+            "--nthread",
+            "1",
+            "-q",
+            "-o",
+            str(tmp_path / "ev2"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    ev = json.loads((tmp_path / "ev2" / "eval.json").read_text())
+    assert (ev["policy_weights"], ev["policy_weights_iteration"]) == ("best", 1)

@@ -37,6 +37,12 @@ def evaluate_cmd(
         help="Sigma of the sampled actions (default: the run's ppo.deploy_std, else its training sigma); "
         "0: the training sigma. Recorded as action_sigma in eval.json.",
     ),
+    weights: str = typer.Option(
+        "deployed",
+        "--weights",
+        help="deployed: the weights the run deploys (the CPU recipe: the best periodic evaluation's); "
+        "latest: the last update's. Recorded as policy_weights in eval.json.",
+    ),
     dataset: Path = typer.Option(None, "--dataset", help="Canonical file to use instead of the run's (same sha256)."),
     backend: str = backend_option(),
     device: str = device_option(),
@@ -57,7 +63,7 @@ def evaluate_cmd(
 
     with user_errors():
         proto = load_protocol(protocol)
-        policy = load_eval_policy(run)
+        policy = load_eval_policy(run, weights)
         if deploy_std is not None:
             policy.policy.deploy_std = float(deploy_std)
         run_dir = Path(policy.metadata["run_dir"])

@@ -31,6 +31,12 @@ def export_cmd(
     ),
     num_envs: int = typer.Option(256, "--num-envs", min=1, help="Worlds stepped together."),
     nthread: int = typer.Option(None, "--nthread", min=1, help="Physics threads (default: all cores)."),
+    weights: str = typer.Option(
+        "deployed",
+        "--weights",
+        help="deployed: the weights the run deploys (the CPU recipe: the best periodic evaluation's); "
+        "latest: the last update's.",
+    ),
     dataset: Path = typer.Option(None, "--dataset", help="Canonical file to use instead of the run's (same sha256)."),
     backend: str = typer.Option(None, "--backend", help="Physics: cpu or warp (default: cpu, or the evaluation's)."),
     device: str = device_option(),
@@ -52,7 +58,7 @@ def export_cmd(
 
     with user_errors():
         proto = load_protocol(protocol)
-        policy = load_eval_policy(run)
+        policy = load_eval_policy(run, weights)
         if deploy_std is not None:
             policy.policy.deploy_std = float(deploy_std)
         r = export_rollouts(

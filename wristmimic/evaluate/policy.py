@@ -68,15 +68,16 @@ class RunPolicy:
         return self.policy.sigma.to(torch.float32)
 
 
-def load_eval_policy(run_dir_or_checkpoint: str | Path) -> RunPolicy:
-    """The policy of a training run folder or checkpoint file, with the run's config as metadata."""
+def load_eval_policy(run_dir_or_checkpoint: str | Path, weights: str = "deployed") -> RunPolicy:
+    """The policy of a training run folder or checkpoint file, with the run's config as metadata; ``weights``:
+    ``deployed`` (what the run deploys) or ``latest`` (the last update's)."""
     from wristmimic.rl import load_policy
     from wristmimic.rl.checkpoint import checkpoint_path
 
     path = Path(run_dir_or_checkpoint)
     ckpt = checkpoint_path(path)
     try:
-        p = load_policy(path)  # load_checkpoint has checked the entries; this catches weights that do not fit
+        p = load_policy(path, weights)  # load_checkpoint has checked the entries; this catches weights that do not fit
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
         detail = first_sentence(str(exc), 240) or type(exc).__name__
         raise InputError(

@@ -75,9 +75,19 @@ class Policy:
         return self
 
 
-def load_policy(run_dir_or_checkpoint: str | Path) -> Policy:
-    """The policy of a run folder (its ``checkpoint.pt``) or of a checkpoint file, on the CPU, in eval mode."""
+WEIGHTS = ("deployed", "latest")
+"""Which weights :func:`load_policy` loads: the ones the run deploys (``deploy_policy`` where it has one: the best
+periodic evaluation's or a moving average) or the last update's."""
+
+
+def load_policy(run_dir_or_checkpoint: str | Path, weights: str = "deployed") -> Policy:
+    """The policy of a run folder (its ``checkpoint.pt``) or of a checkpoint file, on the CPU, in eval mode;
+    ``weights``: one of :data:`WEIGHTS`."""
+    if weights not in WEIGHTS:
+        raise InputError(None, "weights", f"{weights!r}", f"one of {', '.join(WEIGHTS)}")
     state = load_checkpoint(run_dir_or_checkpoint)
+    if weights == "latest":
+        state = {k: v for k, v in state.items() if k not in ("deploy_policy", "deploy")}
     config = json.loads(state["config"])
     ppo = from_jsonable(PPOConfig, config["ppo"])
     weights = state.get("deploy_policy", state["policy"])  # the moving average, where the run kept one
