@@ -279,9 +279,11 @@ def test_deployed_best_is_the_best_periodic_evaluation_and_resumes(
     assert split["deploy"] == state["deploy"] and _same_params(split["deploy_policy"], state["deploy_policy"])
 
 
-def test_deploy_best_needs_periodic_evaluation() -> None:
-    with pytest.raises(InputError, match="deploy_best"):
-        preset("cpu", deploy_best=True, eval_every=0)
+def test_deploy_best_without_periodic_evaluation_deploys_the_latest(dataset: Path, tmp_path: Path) -> None:
+    start_run(_spec(dataset, 2, deploy_best=True, eval_every=0), tmp_path / "run", nthread=1, progress=False)
+    state = load_checkpoint(tmp_path / "run")
+    assert state["deploy"] == {"weights": "latest", "iteration": 2, "frames": 64} and "deploy_policy" not in state
+    assert load_policy(tmp_path / "run").weights == "latest"
 
 
 def test_evaluate_weights_option_loads_the_latest_or_the_deployed(

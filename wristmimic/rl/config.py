@@ -101,7 +101,8 @@ class PPOConfig:
     iteration 100 and 3.5 % at 160, against 100 % and 0 % for the latest weights: it does not remove the swings."""
     deploy_best: bool = False
     """Deploy the policy of the periodic evaluation (``eval_every``) with the highest ``eval/success_rate`` (ties:
-    the later one; the latest or averaged weights until the first evaluation) instead of the last update's:
+    the later one; the latest or averaged weights until the first evaluation, and always with ``eval_every`` 0)
+    instead of the last update's:
     model selection on a validation set of trials (``eval_base_seed``). Saved as ``deploy_policy`` with its
     iteration, frames and success rate (``deploy`` in the checkpoint); evaluation, ``view`` and ``export`` load
     it, resumed training goes on from the latest weights."""
@@ -144,10 +145,6 @@ class PPOConfig:
         if not 0.0 <= self.deploy_ema < 1.0:
             raise InputError(
                 None, "ppo.deploy_ema", f"{self.deploy_ema}", "0 (the latest weights) or a decay in (0, 1)"
-            )
-        if self.deploy_best and self.eval_every < 1:
-            raise InputError(
-                None, "ppo.deploy_best", "true with eval_every 0", "eval_every >= 1 (it selects among them)"
             )
         if self.eval_base_seed is not None and not 0 <= self.eval_base_seed < 2**63:
             raise InputError(None, "ppo.eval_base_seed", f"{self.eval_base_seed}", "None or an integer in [0, 2^63)")
