@@ -300,46 +300,13 @@ def test_evaluate_weights_option_loads_the_latest_or_the_deployed(
     assert _same_params(best.net.state_dict(), state["deploy_policy"])
     with pytest.raises(InputError, match="weights"):
         load_policy(tmp_path / "run", weights="newest")
-    res = CliRunner().invoke(
-        app,
-        [
-            "evaluate",
-            str(tmp_path / "run"),
-            "-p",
-            "quick",
-            "-n",
-            "2",
-            "--num-envs",
-            "2",
-            "--nthread",
-            "1",
-            "-q",
-            "--weights",
-            "latest",
-            "-o",
-            str(tmp_path / "ev"),
-        ],
-    )
-    assert res.exit_code == 0, res.output
-    assert "policy_weights" not in json.loads((tmp_path / "ev" / "eval.json").read_text())
-    res = CliRunner().invoke(
-        app,
-        [
-            "evaluate",
-            str(tmp_path / "run"),
-            "-p",
-            "quick",
-            "-n",
-            "2",
-            "--num-envs",
-            "2",
-            "--nthread",
-            "1",
-            "-q",
-            "-o",
-            str(tmp_path / "ev2"),
-        ],
-    )
-    assert res.exit_code == 0, res.output
-    ev = json.loads((tmp_path / "ev2" / "eval.json").read_text())
+
+    def evaluate(out: str, *extra: str) -> dict:
+        args = ["evaluate", str(tmp_path / "run"), "-p", "quick", "-n", "2", "--num-envs", "2", "--nthread", "1", "-q"]
+        res = CliRunner().invoke(app, [*args, *extra, "-o", str(tmp_path / out)])
+        assert res.exit_code == 0, res.output
+        return json.loads((tmp_path / out / "eval.json").read_text())
+
+    assert "policy_weights" not in evaluate("ev", "--weights", "latest")
+    ev = evaluate("ev2")
     assert (ev["policy_weights"], ev["policy_weights_iteration"]) == ("best", 1)

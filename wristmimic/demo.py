@@ -9,8 +9,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from wristmimic.errors import InputError
+
+if TYPE_CHECKING:
+    from wristmimic.evaluate.policy import RunPolicy
 
 SCENE = "synth_default"
 
@@ -113,9 +117,9 @@ def run_demo(
     return DemoResult(dataset, run_dir, eval_dir, report_dir, recording, t, _success_pct(res), deployed_text(policy))
 
 
-def deployed_text(policy: object) -> str:
+def deployed_text(policy: RunPolicy) -> str:
     """Which weights a loaded run deploys, in words."""
-    p = policy.policy  # type: ignore[attr-defined]
+    p = policy.policy
     kind = {"best": "the best periodic evaluation's", "ema": "the moving average's", "latest": "the last update's"}
     return f"{kind.get(p.weights, p.weights)} weights (iteration {p.weights_iteration}, {p.weights_frames:,} frames)"
 

@@ -90,9 +90,9 @@ def load_policy(run_dir_or_checkpoint: str | Path, weights: str = "deployed") ->
         state = {k: v for k, v in state.items() if k not in ("deploy_policy", "deploy")}
     config = json.loads(state["config"])
     ppo = from_jsonable(PPOConfig, config["ppo"])
-    weights = state.get("deploy_policy", state["policy"])  # the moving average, where the run kept one
-    std_key = "log_std_param" if "log_std_param" in weights else "log_std"  # older checkpoints: 'log_std'
-    obs_size, action_size = weights["normalizer.mean"].shape[0], weights[std_key].shape[0]
+    params = state.get("deploy_policy", state["policy"])  # the deployed weights, where the run keeps its own
+    std_key = "log_std_param" if "log_std_param" in params else "log_std"  # older checkpoints: 'log_std'
+    obs_size, action_size = params["normalizer.mean"].shape[0], params[std_key].shape[0]
     net = ActorCritic(
         obs_size,
         action_size,
@@ -103,7 +103,7 @@ def load_policy(run_dir_or_checkpoint: str | Path, weights: str = "deployed") ->
         ppo.learn_std,
         ppo.min_log_std,
     )
-    net.load_state_dict(weights)
+    net.load_state_dict(params)
     net.eval()
     meta = state["metadata"]
     deploy = state.get("deploy") or {}
@@ -118,7 +118,7 @@ def load_policy(run_dir_or_checkpoint: str | Path, weights: str = "deployed") ->
         config=config,
         feedforward=state.get("feedforward"),
         deploy_std=ppo.deploy_std,
-        weights=deploy.get("weights", "ema" if "deploy_policy" in state else "latest"),
+        weights=deploy.get("weights", "latest"),
         weights_iteration=int(deploy.get("iteration", state["iteration"])),
         weights_frames=int(deploy.get("frames", state["frames"])),
     )
