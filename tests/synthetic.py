@@ -125,8 +125,11 @@ def _mjcf(tree: list[tuple[str, str | None, tuple[float, float, float]]]) -> str
     )
 
 
-def smplx_like_mjcf() -> str:
-    return _mjcf(_smplx_tree())
+def smplx_like_mjcf(bone_scale: dict[str, float] | None = None) -> str:
+    """The SMPL-X-like humanoid; ``bone_scale`` {body name: factor} lengthens those bodies' offsets (another
+    subject's skeleton)."""
+    scale = bone_scale or {}
+    return _mjcf([(n, p, tuple(scale.get(n, 1.0) * np.asarray(o))) for n, p, o in _smplx_tree()])
 
 
 def parahome_like_mjcf() -> str:
@@ -166,9 +169,10 @@ def _motion(mjcf: str, T: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.nd
     return root_pos, root_quat, jq, fk.body_pos, fk.body_quat
 
 
-def intermimic_motion(T: int = 40, seed: int = 0) -> np.ndarray:
-    """A (T, 591) InterMimic tensor for :func:`smplx_like_mjcf` with the object held at the left wrist."""
-    root_pos, root_quat, jq, bpos, bquat = _motion(smplx_like_mjcf(), T, seed)
+def intermimic_motion(T: int = 40, seed: int = 0, mjcf: str | None = None) -> np.ndarray:
+    """A (T, 591) InterMimic tensor for ``mjcf`` (default :func:`smplx_like_mjcf`) with the object held at the left
+    wrist."""
+    root_pos, root_quat, jq, bpos, bquat = _motion(mjcf or smplx_like_mjcf(), T, seed)
     d = np.zeros((T, 591))
     d[:, 0:3] = root_pos
     d[:, 3:7] = wxyz_to_xyzw(root_quat)

@@ -1,3 +1,3 @@
 """wristmimic: physics-based human-object-interaction retargeting (WristMimic) on MuJoCo."""
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

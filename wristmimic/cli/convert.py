@@ -51,6 +51,13 @@ def intermimic(
     object_name: str = typer.Option(
         None, "--object", help="Object name for every sequence [default: from the name sub<N>_<object>_<NNN>]."
     ),
+    generic_humanoid: bool = typer.Option(
+        False,
+        "--generic-humanoid",
+        help="Use the humanoid .xml as shipped for every sequence. Default: one humanoid per subject "
+        "(<xml stem>_<subject>) whose bone offsets are read from the stored body positions and whose feet reach "
+        "the floor; the shipped omomo.xml floats sub2's feet 8-11 cm.",
+    ),
     hull_cache: Path = _CACHE,
     no_hull_cache: bool = _NOCACHE,
     hull_seed: int = _SEED,
@@ -71,6 +78,7 @@ def intermimic(
             humanoid=humanoid,
             object_name=object_name,
             options=_options(hull_cache, no_hull_cache, hull_seed, quiet),
+            fit_subjects=not generic_humanoid,
         )
     _summary(r)
 

@@ -13,6 +13,12 @@ rotations exactly (the stored exp-maps, cols 9:162, equal these local rotations 
 straight to hinges they are 5-7 cm off at the wrists). Finger slots of the stored positions (cols 162:318)
 do not follow the body order, so body positions come from FK; the source positions are kept with a
 validity mask (non-finger slots).
+
+The shipped ``omomo.xml`` is one generic body, but the stored positions are FK of a skeleton generated per
+subject. By default each subject gets its own humanoid (``<xml stem>_<subject>``): bone offsets read back from
+the stored positions (:mod:`wristmimic.humanoid.fit`; FK then matches them to 0.01 mm) and foot boxes deepened
+so that the lowest foot point over each sequence's first 30 frames is on the floor (InterAct's floor rule; the
+subjects wear shoes). With the generic body, sub2's feet float 8-11 cm and its hands sit 4 cm off the object.
 """
 
 from __future__ import annotations
@@ -38,7 +44,9 @@ from wristmimic.convert.progress import progress_bar
 from wristmimic.errors import InputError
 from wristmimic.format.records import SequenceRecord
 from wristmimic.format.writer import DatasetWriter
-from wristmimic.humanoid.kinematics import local_from_global
+from wristmimic.humanoid.fit import FIT_TOL_M, fit_offsets, lowest_foot_height, refit_mjcf, thicken_feet
+from wristmimic.humanoid.kinematics import hinge_angles, local_from_global, qpos_from
+from wristmimic.humanoid.skeleton import Skeleton
 from wristmimic.rotations import quat_angle, quat_normalize, rotvec_to_quat, xyzw_to_wxyz
 from wristmimic.safe_io import load_pt_tensor, sha256_file
 
@@ -58,6 +66,10 @@ COLUMNS: dict[str, tuple[int, int, str]] = {
     "body_quat": (383, 591, "52 x 4 global body quaternions xyzw -> body_quat (wxyz)"),
 }
 EXPMAP_TOL_DEG = 0.5
+FLOOR_FRAMES = 30
+"""InterAct puts the lowest body vertex over a sequence's first 30 frames on the floor."""
+FOOT_TOL_M, FOOT_ITERATIONS = 1e-4, 6
+"""Feet are deepened until their lowest point over those frames is within this of the floor (at most this often)."""
 _SEQ_RE = re.compile(r"^(?P<subject>sub\d+)_(?P<object>[a-z]+)_(?P<num>\d+)$")
 
 
@@ -145,8 +157,10 @@ def convert_intermimic(
     humanoid: str | Path | None = None,
     object_name: str | None = None,
     options: ConvertOptions | None = None,
+    fit_subjects: bool = True,
 ) -> ConvertReport:
-    """Convert an InterMimic-layout folder into one canonical file at ``out`` (atomic)."""
+    """Convert an InterMimic-layout folder into one canonical file at ``out`` (atomic). ``fit_subjects``: one
+    humanoid per subject fitted to the stored body positions (else the MJCF as shipped for every sequence)."""
     opts = options or ConvertOptions()
     source = discover(Path(src), Path(humanoid) if humanoid else None, sequences)
     report = ConvertReport(Path(out))
@@ -161,8 +175,26 @@ def convert_intermimic(
 
     # read every motion first: bad input fails before any expensive work
     motions = {p.stem: read_motion(p) for p in source.motions}
+    paths = {p.stem: p for p in source.motions}
     obj_names = {s: object_name or parse_sequence_name(s)[1] for s in motions}
     inputs = {str(p.relative_to(source.root)): sha256_file(p) for p in [source.humanoid, *source.motions]}
+    humans: dict[str, tuple[str, object, Skeleton]] = {}  # sequence -> (humanoid id, record, skeleton)
+    if fit_subjects:
+        # a subject's humanoid is fitted to all of its motion files in the folder, whichever were selected
+        subjects = {_subject(sid) for sid in motions}
+        fit_paths = {p.stem: p for p in sorted((source.root / "motions").glob("*.pt")) if _subject(p.stem) in subjects}
+        fit_motions = {s: motions[s] if s in motions else read_motion(p) for s, p in fit_paths.items()}
+        inputs |= {str(p.relative_to(source.root)): sha256_file(p) for p in fit_paths.values() if p.stem not in motions}
+        by_subject: dict[str, list[str]] = {}
+        for sid in fit_motions:
+            by_subject.setdefault(_subject(sid), []).append(sid)
+        for subj, sids in by_subject.items():
+            sub_id = f"{hid}_{subj}" if subj else hid
+            sub = subject_humanoid(mjcf, skel, roles, {s: fit_motions[s] for s in sids}, fit_paths)
+            srec, sskel = humanoid_record(sub.mjcf, sub_id, f"{source.humanoid.name} {sub.note}")
+            humans.update({s: (sub_id, srec, sskel) for s in sids if s in motions})
+    else:
+        humans = {s: (hid, hrec, skel) for s in motions}
 
     with (
         DatasetWriter(
@@ -170,7 +202,8 @@ def convert_intermimic(
         ) as w,
         progress_bar(opts.show_progress) as bar,
     ):
-        w.add_humanoid(hid, hrec)
+        for h_id, h_rec, _ in {h[0]: h for h in humans.values()}.values():
+            w.add_humanoid(h_id, h_rec)
         # the manipulated object moves: dynamic whatever its name
         assets = write_objects(
             w, sorted(set(obj_names.values())), source.objects_dir, source.root, opts, report, inputs, bar, static=False
@@ -178,17 +211,8 @@ def convert_intermimic(
         task = bar.add_task("sequences", total=len(motions))
         for sid, data in motions.items():
             t0 = time.perf_counter()
-            rec = _sequence(
-                sid,
-                data,
-                source.motions[list(motions).index(sid)],
-                skel,
-                roles,
-                valid,
-                assets[obj_names[sid]],
-                hid,
-                opts,
-            )
+            h_id, h_rec, h_skel = humans[sid]
+            rec = _sequence(sid, data, paths[sid], h_skel, h_rec.roles, valid, assets[obj_names[sid]], h_id, opts)
             w.add_sequence(sid, rec)
             report.sequences.append(sid)
             report.seconds_per_sequence[sid] = time.perf_counter() - t0
@@ -196,6 +220,71 @@ def convert_intermimic(
             bar.advance(task)
         w.set_attr("input_sha256", inputs)
     return report
+
+
+def _subject(sid: str) -> str:
+    m = _SEQ_RE.match(sid)
+    return m["subject"] if m else ""
+
+
+@dataclass
+class SubjectHumanoid:
+    """A humanoid fitted to one subject's sequences."""
+
+    mjcf: str
+    offsets: np.ndarray
+    """(B, 3) bone offsets (m) in the parent frame."""
+    spread_m: float
+    """Largest spread of a fitted bone over all frames (m)."""
+    foot_depth_m: float
+    """How far the foot boxes were deepened (m)."""
+
+    @property
+    def note(self) -> str:
+        return (
+            f"(bone offsets fitted to the body positions, columns 162:318; spread {1000 * self.spread_m:.3f} mm; "
+            f"foot boxes +{1000 * self.foot_depth_m:.1f} mm)"
+        )
+
+
+def _body_quat(data: np.ndarray) -> np.ndarray:
+    return quat_normalize(xyzw_to_wxyz(data[:, 383:591].reshape(len(data), NUM_BODIES, 4)))
+
+
+def subject_humanoid(
+    mjcf: str, skel: Skeleton, roles: dict, motions: dict[str, np.ndarray], paths: dict[str, Path]
+) -> SubjectHumanoid:
+    """The generic ``mjcf`` with bone offsets read from the stored positions of one subject's ``motions`` and feet
+    deepened to the floor over each sequence's first :data:`FLOOR_FRAMES` frames."""
+    valid = np.ones(NUM_BODIES, bool)
+    valid[roles["fingers"]] = False
+    pos = np.concatenate([d[:, 162:318].reshape(len(d), NUM_BODIES, 3) for d in motions.values()])
+    quat = np.concatenate([_body_quat(d) for d in motions.values()])
+    offsets, spread = fit_offsets(skel, pos, quat, valid)
+    offsets = np.round(offsets, 6)  # micrometres: the same humanoid whichever frames were averaged
+    if spread.max() > FIT_TOL_M:
+        b = int(spread.argmax())
+        raise InputError(
+            paths[next(iter(motions))],
+            "columns 162:318",
+            f"body positions are not forward kinematics of one skeleton (bone {skel.body_names[b]} varies "
+            f"{1000 * spread[b]:.1f} mm over frames)",
+            f"bone offsets constant to {1000 * FIT_TOL_M:g} mm (or convert with --generic-humanoid)",
+        )
+    fitted = refit_mjcf(mjcf, skel, offsets)
+    feet = [skel.body_names[b] for b in roles["feet"]]
+    poses = []
+    for d in motions.values():
+        head = d[:FLOOR_FRAMES]
+        bq = _body_quat(head)
+        poses.append(qpos_from(skel, head[:, 0:3], bq[:, 0], hinge_angles(local_from_global(skel, bq))))
+    depth = 0.0
+    for _ in range(FOOT_ITERATIONS):  # a tilted foot reaches down less than its box grows: repeat
+        low = min(lowest_foot_height(fitted, q, feet) for q in poses)
+        if low <= FOOT_TOL_M:
+            break
+        fitted, depth = thicken_feet(fitted, feet, low), depth + low
+    return SubjectHumanoid(fitted, offsets, float(spread.max()), depth)
 
 
 def _sequence(
@@ -224,7 +313,7 @@ def _sequence(
     )
     shipped = data[:, 331:383].astype(np.int8)
     summ = contact_summary(shipped, roles, opts.contact)
-    subject = _SEQ_RE.match(sid)["subject"] if _SEQ_RE.match(sid) else ""
+    subject = _subject(sid)
     agree = label_agreement(geo, shipped)
     agree_hands = label_agreement(geo, shipped, np.concatenate([roles["left_hand"], roles["right_hand"]]))
     return SequenceRecord(
