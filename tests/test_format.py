@@ -39,7 +39,7 @@ def test_root_attributes_and_index(synth_h5: Path) -> None:
 def test_reader_returns_humanoid_objects_and_lazy_arrays(synth_h5: Path) -> None:
     with open_dataset(synth_h5) as ds:
         seq = ds.sequence("sub1_box_000")
-        assert seq.object_ids == ["box"] and seq.humanoid_id == "humanoid"
+        assert seq.object_ids == ["box"] and seq.humanoid_id == "humanoid_sub1"
         d = seq["body_pos"]
         assert d.shape == (70, 52, 3) and d.chunks[0] == 64 and d.compression == "gzip"
         part = seq.array("body_pos", slice(10, 20))
@@ -62,7 +62,7 @@ def test_validate_passes_then_lists_every_problem(synth_h5: Path, tmp_path: Path
         f["sequences/sub1_box_000/contacts/labels"][3, 4] = 5
         f["sequences/sub1_box_001/body_pos"][1, 1, 1] = np.nan
         f["sequences/sub1_box_001"].attrs["humanoid_id"] = "nobody"
-        del f["humanoids/humanoid/roles/wrists"]
+        del f["humanoids/humanoid_sub1/roles/wrists"]
     problems = validate(bad)
     text = "\n".join(problems)
     assert "sub1_box_000/root_quat: 1 quaternions not unit" in text
