@@ -6,7 +6,10 @@ Measured with the recipe and reference of 2026-12-02 (64 trials, the recipe's si
 1.1, 6.3 and 4.7 cm against 0.7 cm (the zero-action hands never move the box, so object error cannot separate the
 policies). The seeds now differ by up to 69 frames, but the smallest gap to zero actions is 28.6 frames; the margin
 asserted, 4 frames, stays far below it (it was chosen for the previous recipe, whose seeds gave 40.9, 40.0, 40.9
-against 32.9).
+against 32.9). "Not knocked away" is asserted at the paper's success threshold, 10 cm of mean object error: the seeds'
+1.1-6.3 cm are seed noise (a fresh machine of 2026-12-02 gave seed 0 4.5 cm, the same code having given 1.1 on the
+previous one: floating-point differences between machines grow over a training run), a box knocked off the
+table is tens of centimetres off.
 """
 
 from __future__ import annotations
@@ -62,4 +65,4 @@ def test_recipe_survives_frame_0_trials_longer_than_zero_actions(tmp_path: Path)
     zero = _Zero(trained.metadata, trained.policy.action_size, ppo.sigma)
     (f_trained, obj_trained), (f_zero, _) = _trials(trained), _trials(zero)
     assert f_trained > f_zero + MARGIN, (f_trained, f_zero)
-    assert obj_trained < 2.0  # the object is not knocked away
+    assert obj_trained < 10.0  # the object is not knocked away (seeds: 1.1-6.3 cm)
