@@ -291,7 +291,7 @@ def _sequence(
     sid: str, data: np.ndarray, path: Path, skel, roles, valid: np.ndarray, asset, hid: str, opts: ConvertOptions
 ) -> SequenceRecord:
     T = data.shape[0]
-    body_quat = quat_normalize(xyzw_to_wxyz(data[:, 383:591].reshape(T, NUM_BODIES, 4)))
+    body_quat = _body_quat(data)
     root_pos = data[:, 0:3]
     root_quat = quat_normalize(xyzw_to_wxyz(data[:, 3:7]))
     if np.degrees(quat_angle(root_quat, body_quat[:, 0])).max() > EXPMAP_TOL_DEG:

@@ -18,7 +18,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from wristmimic.humanoid.skeleton import Skeleton
-from wristmimic.rotations import quat_to_matrix
+from wristmimic.rotations import quat_to_matrix, rotvec_to_quat
 
 FIT_TOL_M = 1e-3
 """Largest allowed spread (m) of a bone offset over frames: above it the positions are not FK of one skeleton."""
@@ -48,13 +48,11 @@ def fit_offsets(
 def _align(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotation matrix taking the direction of ``u`` to that of ``v`` (the shortest arc)."""
     a, b = u / np.linalg.norm(u), v / np.linalg.norm(v)
-    c, w = float(a @ b), np.cross(a, b)
-    s = float(np.linalg.norm(w))
-    if s < 1e-12:
-        return np.eye(3) if c > 0 else -np.eye(3)
-    k = w / s
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
+    w = np.cross(a, b)
+    if np.linalg.norm(w) < 1e-12:  # parallel or opposite: any axis perpendicular to a
+        w = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
+    angle = np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)
+    return quat_to_matrix(rotvec_to_quat(angle * w / np.linalg.norm(w)))
 
 
 def _fmt(v: np.ndarray) -> str:
