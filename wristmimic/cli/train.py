@@ -47,6 +47,12 @@ def train_cmd(
     backend: str = backend_option(),
     device: str = device_option(),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    overrides: list[str] = typer.Option(
+        None,
+        "--set",
+        help="Override one config field, SECTION.FIELD=VALUE (repeatable; SECTION: env, ppo or scene_config; value "
+        "as JSON), e.g. --set env.object_controller.zero_by_frames=1500000. config.json records the result.",
+    ),
 ) -> None:
     """Train one PPO policy per scene; each run folder gets config.json, metrics.csv and checkpoint.pt.
 
@@ -56,9 +62,12 @@ def train_cmd(
 
     Example: wristmimic train datasets/omomo.h5 --scene sub2_largetable_000 --variant wristmimic --preset cpu
 
+    Example: wristmimic train data.h5 --scene SEQ --set ppo.learning_rate=3e-4 --set env.residual_scale=0.4
+
     Example: wristmimic train --resume runs/sub2_largetable_000-wristmimic-seed0-20261123-120000
     """
     from wristmimic.rl.config import preset as make_preset
+    from wristmimic.rl.overrides import with_overrides
     from wristmimic.rl.train import TrainSpec, default_run_dir, resume_run, start_run
     from wristmimic.safe_io import check_output_folder
 
@@ -66,7 +75,7 @@ def train_cmd(
         if max_frames is not None and max_frames < 1:
             raise InputError(None, "--max-frames", f"{max_frames}", "a positive number of frames")
         if resume is not None:
-            if scene or scenes or dataset or backend != "cpu" or device or checkpoint_seconds is not None:
+            if scene or scenes or dataset or backend != "cpu" or device or checkpoint_seconds is not None or overrides:
                 raise InputError(None, "--resume", "takes dataset, scene, backend and config from the run folder")
             r = resume_run(resume, max_frames=max_frames, nthread=nthread, progress=not quiet)
             typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
@@ -81,6 +90,7 @@ def train_cmd(
             spec = TrainSpec(
                 dataset, sid, variant, seed, preset, ppo, ref_frames=ref_frames, backend=backend, device=device
             )
+            spec = with_overrides(spec, overrides or ())
             r = start_run(spec, default_run_dir(out, sid, variant, seed), nthread=nthread, progress=not quiet)
             typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
             if r.status == "interrupted":

@@ -51,6 +51,8 @@ class TrainSpec:
     """Physics backend: ``cpu`` (MuJoCo threads) or ``warp`` (MuJoCo Warp; policy and math on its device)."""
     device: str | None = None
     """Warp device (``cuda``, ``cuda:1``, ``cpu``); None: a GPU if there is one."""
+    overrides: tuple[str, ...] = ()
+    """``--set`` strings already applied to ``env``, ``ppo`` and ``scene_config`` (recorded in ``config.json``)."""
 
 
 @dataclass
@@ -100,6 +102,7 @@ def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any
         "env": to_jsonable(env_cfg),
         "scene_config": to_jsonable(spec.scene_config),
         "physics": {"backend": spec.backend, "device": spec.device},
+        "overrides": list(spec.overrides),
         "code": {"version": wristmimic.__version__, "git_commit": git_commit()},
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
