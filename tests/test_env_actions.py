@@ -62,6 +62,44 @@ def test_velocity_feedforward_adds_kv_over_kp_times_the_reference_velocity(datas
     np.testing.assert_allclose(diff[free], (kv / kp * vel)[free], atol=1e-5)
 
 
+def test_gravity_feedforward_balances_gravity_at_the_reference_pose_on_upper_body_hinges(dataset: Path) -> None:
+    """With ``gravity_feedforward`` the PD torque at the reference pose (zero velocity) equals MuJoCo's gravity
+    force on every upper-body hinge; legs and fingers keep the plain targets."""
+    import mujoco
+
+    from wristmimic.env.gravity import leg_bodies
+
+    env, plain = (
+        _env(dataset, velocity_feedforward=False, gravity_feedforward=True),
+        _env(dataset, velocity_feedforward=False),
+    )
+    sc, m = env.scene, env.scene.model
+    skel, roles = sc.skeleton, sc.humanoid.roles
+    legs = np.repeat(np.isin(skel.joint_bodies, leg_bodies(sc)), 3)
+    fingers = np.repeat(np.isin(skel.joint_bodies, roles["fingers"]), 3)
+    assert legs.sum() >= 4 * 3 * 2 and not (legs & fingers).any()
+    a, frames = torch.zeros(3, env.action_size), torch.tensor([0, 9, 20])
+    diff = (env.action_to_ctrl(a, frames) - plain.action_to_ctrl(a, frames)).numpy()
+    assert np.all(diff[:, legs | fingers] == 0.0) and np.abs(diff).max() > 1e-3
+    d = mujoco.MjData(m)
+    ctrl = env.action_to_ctrl(a, frames).numpy()
+    lo, hi = sc.ctrl_range[:, 0], sc.ctrl_range[:, 1]
+    dof = sc.hinge_dofadr.reshape(-1)
+    checked = 0
+    for i, f in enumerate(frames.tolist()):
+        d.qpos[:] = m.qpos0
+        d.qpos[0:3], d.qpos[3:7] = env.ref.root_pos[f].numpy(), env.ref.root_quat[f].numpy()
+        d.qpos[sc.hinge_qposadr.reshape(-1)] = env.ref.joint_angles[f].numpy()
+        d.qvel[:] = 0.0
+        d.ctrl[sc.actuator_ids.reshape(-1)] = ctrl[i]
+        mujoco.mj_forward(m, d)
+        upper = ~(legs | fingers) & (ctrl[i] > lo + 1e-6) & (ctrl[i] < hi - 1e-6)  # not clipped to the range
+        np.testing.assert_allclose(d.qfrc_actuator[dof][upper], d.qfrc_bias[dof][upper], atol=1e-2)
+        assert np.abs(d.qfrc_bias[dof][upper]).max() > 1.0  # gravity does load these hinges
+        checked += upper.sum()
+    assert checked > 0
+
+
 def test_absolute_mode_is_intermimic_mapping_and_unknown_modes_are_refused(dataset: Path) -> None:
     env = _env(dataset, action_mode="absolute")
     assert not env.residual_hinges.any()
@@ -82,11 +120,13 @@ def test_runs_recorded_before_action_modes_read_as_absolute() -> None:
     assert env_config_from_dict(to_jsonable(EnvConfig())) == EnvConfig()
 
 
-@pytest.mark.parametrize("mode", ["residual", "absolute"])
-def test_train_evaluate_and_view_map_actions_the_same_way(dataset: Path, tmp_path: Path, mode: str) -> None:
+@pytest.mark.parametrize("mode, gravity", [("residual", False), ("residual", True), ("absolute", False)])
+def test_train_evaluate_and_view_map_actions_the_same_way(
+    dataset: Path, tmp_path: Path, mode: str, gravity: bool
+) -> None:
     from wristmimic.evaluate.policy import load_eval_policy
 
-    env_cfg = variant_config("wristmimic", action_mode=mode)
+    env_cfg = variant_config("wristmimic", action_mode=mode, gravity_feedforward=gravity)
     ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
     spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32), env=env_cfg)
     start_run(spec, tmp_path / "run", progress=False)
@@ -98,6 +138,6 @@ def test_train_evaluate_and_view_map_actions_the_same_way(dataset: Path, tmp_pat
     frames = torch.tensor([3, 17])
     want = train_env.action_to_ctrl(a, frames)
     for env in (eval_env, view_env):
-        assert env.cfg.action_mode == mode
+        assert env.cfg.action_mode == mode and env.cfg.gravity_feedforward == gravity
         assert not env.has_object_controller  # the training-only object controller never reaches them
         torch.testing.assert_close(env.action_to_ctrl(a, frames), want, rtol=0, atol=0)

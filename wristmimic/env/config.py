@@ -239,6 +239,9 @@ class EnvConfig:
     velocity_feedforward: bool = True
     """Residual hinges target q_ref + (kv / kp) q_ref_dot: the position actuator's damping then pulls toward the
     reference velocity instead of zero (no lag on moving joints)."""
+    gravity_feedforward: bool = False
+    """Residual upper-body hinges (not legs, not fingers) also target + tau_g(q_ref) / kp, the gravity load at the
+    reference pose over the hinge's stiffness (:mod:`wristmimic.env.gravity`): PD alone sags under gravity."""
     residual_scale: float = 0.5
     """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
@@ -249,6 +252,7 @@ class EnvConfig:
 LEGACY_ENV_DEFAULTS: dict = {
     "action_mode": "absolute",
     "velocity_feedforward": False,
+    "gravity_feedforward": False,
     "object_controller": {"enabled": False},
     "starts": {"adaptive": False},
     "weights": {"root_pos": 0.0, "root_rot": 0.0},

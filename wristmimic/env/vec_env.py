@@ -24,6 +24,7 @@ import torch
 from wristmimic.env import window as W
 from wristmimic.env.bodies import BodySets
 from wristmimic.env.config import EnvConfig, check_env_config
+from wristmimic.env.gravity import gravity_offsets
 from wristmimic.env.observations import (
     GoalRef,
     RefFrame,
@@ -202,6 +203,14 @@ class WristMimicEnv:
         self.feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
         """(T, D) open-loop offsets added to the residual hinges' targets (:mod:`wristmimic.env.feedforward`);
         zero unless a run's optimised offsets are loaded."""
+        self.gravity_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        """(T, D) gravity-holding offsets of the residual hinges' targets (``EnvConfig.gravity_feedforward``)."""
+        if self.cfg.gravity_feedforward and self.cfg.action_mode == "residual":
+            r = reference
+            g = gravity_offsets(
+                scene, *(x.detach().cpu().double().numpy() for x in (r.root_pos, r.root_quat, r.joint_angles))
+            )
+            self.gravity_feedforward = f32(g)
         self.eval_info = True
         """Put the evaluation errors (``info["eval"]``) in every step's info; training turns it off (unused there)."""
         self.object_gain = 0.0
@@ -478,6 +487,7 @@ class WristMimicEnv:
         if self.cfg.action_mode == "residual":
             f = (self.frame + 1 if frames is None else frames).clamp(0, self.ref.num_frames - 1)
             ref = self.ref.joint_angles[f] + self._ff_time * self.ref.joint_vel[f] + self.feedforward[f]
+            ref = ref + self.gravity_feedforward[f]
             residual = ref + self.cfg.residual_scale * a
             target = torch.where(self.residual_hinges, residual, target)
         return torch.maximum(torch.minimum(target, self._hi), self._lo)
