@@ -82,6 +82,32 @@ def test_hand_contacts_have_torsional_friction_and_old_runs_keep_theirs(synth_fi
         assert (model.geom_condim[body] == 3).all()  # only the hands get torsional friction
 
 
+def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: tuple[Path, Path]) -> None:
+    from wristmimic.errors import InputError
+
+    with open_dataset(synth_files[0]) as ds:
+        o = build_scene(ds, "sub1_box_000").model.opt  # defaults: MuJoCo's own
+        assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone) == (
+            mujoco.mjtSolver.mjSOL_NEWTON,
+            100,
+            50,
+            1e-8,
+            mujoco.mjtCone.mjCONE_PYRAMIDAL,
+        )
+        cfg = SceneConfig(solver="pgs", iterations=20, ls_iterations=5, tolerance=1e-6, cone="elliptic")
+        o = build_scene(ds, "sub1_box_000", cfg).model.opt
+        assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone) == (
+            mujoco.mjtSolver.mjSOL_PGS,
+            20,
+            5,
+            1e-6,
+            mujoco.mjtCone.mjCONE_ELLIPTIC,
+        )
+        for bad in (SceneConfig(solver="jacobi"), SceneConfig(cone="round"), SceneConfig(iterations=0)):
+            with pytest.raises(InputError, match="scene_config"):
+                build_scene(ds, "sub1_box_000", bad)
+
+
 def test_parahome_scene_has_fixed_supports(synth_files: tuple[Path, Path]) -> None:
     with open_dataset(synth_files[1]) as ds:
         sc = build_scene(ds, "s1_move_box")

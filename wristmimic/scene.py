@@ -57,6 +57,16 @@ class SceneConfig:
     """Physics steps per 30 Hz control step."""
     integrator: str = "implicitfast"
     """Euler integrates the light fingers' actuator damping explicitly and explodes at dt >= 1/240."""
+    solver: str = "newton"
+    """MuJoCo constraint solver: newton, cg or pgs (``benchmarks/physics_sweep.py`` measures each)."""
+    iterations: int = 100
+    """Solver iterations at most (MuJoCo's default; Newton stops at ``tolerance``, ~3 per step on OMOMO)."""
+    ls_iterations: int = 50
+    """Line-search iterations at most (Newton and CG)."""
+    tolerance: float = 1e-8
+    """Solver tolerance (MuJoCo's default)."""
+    cone: str = "pyramidal"
+    """Friction cone: pyramidal (MuJoCo's default) or elliptic."""
     armature: float = 0.02
     density: float = 1000.0
     gains: Gains = field(default_factory=Gains)
@@ -296,6 +306,22 @@ def _add_object(
         )
 
 
+SOLVERS, CONES = ("newton", "cg", "pgs"), ("pyramidal", "elliptic")
+
+
+def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    if cfg.solver not in SOLVERS or cfg.cone not in CONES:
+        raise InputError(
+            None, "scene_config", f"solver {cfg.solver!r}, cone {cfg.cone!r}", f"solver in {SOLVERS}, cone in {CONES}"
+        )
+    if cfg.iterations < 1 or cfg.ls_iterations < 1 or not cfg.tolerance >= 0.0:
+        raise InputError(None, "scene_config", "iterations and ls_iterations >= 1, tolerance >= 0")
+    spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{cfg.solver.upper()}")
+    spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{cfg.cone.upper()}")
+    spec.option.iterations, spec.option.ls_iterations = int(cfg.iterations), int(cfg.ls_iterations)
+    spec.option.tolerance = float(cfg.tolerance)
+
+
 def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None) -> Scene:
     """Build the MuJoCo scene of ``sequence_id`` from an open canonical file."""
     cfg = config or SceneConfig()
@@ -308,6 +334,7 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
     _strip_source_extras(spec)
     spec.option.timestep = cfg.timestep
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{cfg.integrator.upper()}")
+    _set_solver(spec, cfg)
     gains = _humanoid(spec, skel, hum.roles, cfg, own_ranges=bool(hum.hand))
     if cfg.floor:
         spec.worldbody.add_geom(
