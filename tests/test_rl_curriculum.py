@@ -95,3 +95,44 @@ def test_training_logs_the_gain_records_when_it_reached_zero_and_evaluation_neve
     assert config["env"]["object_controller"]["enabled"] and not config["scene_config"]["object_actuators"]
     env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
     assert not env.has_object_controller and env.object_gain == 0.0
+
+
+def test_weight_ramp_keeps_the_weight_after_the_pose_gain_is_gone() -> None:
+    cfg = ObjectControllerConfig(zero_by_frames=100, weight_zero_by_frames=400, min_gain=0.05)
+    cur = ObjectCurriculum(cfg, num_frames=101)
+    assert cur.weight_gain(0) == 1.0
+    cur.update(terminations=100, world_steps=100, frames=100)
+    assert cur.gain == 0.0 and cur.weight_gain(100) == pytest.approx(0.75)
+    assert cur.weight_gain(390) == 0.0 and cur.weight_gain(400) == 0.0  # below min_gain, then the ramp's end
+    same = ObjectCurriculum(replace(cfg, weight_zero_by_frames=0), 101)
+    same.update(terminations=100, world_steps=100, frames=50)
+    assert same.weight_gain(50) == same.gain == pytest.approx(0.5)  # 0: the weight follows the pose gain
+
+
+def test_weight_support_alone_is_exactly_the_objects_weight(dataset: Path) -> None:
+    """Pose gain 0, weight gain 1: the wrench is m g upward and nothing else; with no weight gain, nothing."""
+    env = WristMimicEnv.from_file(dataset, SID, 1, variant_config("wristmimic"), SceneConfig(object_actuators=True))
+    env.reset(start_frames=torch.full((1,), 5, dtype=torch.long))
+    mg = float(env._obj_mass[0, 0]) * 9.81
+    env.object_gain, env.object_weight_gain = 0.0, 1.0
+    w = env.object_wrench()[0, 0]
+    assert w[2] == pytest.approx(mg, rel=1e-3) and torch.all(w[[0, 1, 3, 4, 5]] == 0)
+    env.object_gain, env.object_weight_gain = 0.5, 0.0
+    pose_only = env.object_wrench()[0, 0]
+    env.object_weight_gain = None  # the weight follows the pose gain
+    assert env.object_wrench()[0, 0][2] == pytest.approx(float(pose_only[2]) + 0.5 * mg, rel=1e-4, abs=1e-4)
+
+
+def test_training_logs_the_weight_ramp_and_evaluation_never_applies_it(dataset: Path, tmp_path: Path) -> None:
+    oc = ObjectControllerConfig(zero_by_frames=32, weight_zero_by_frames=32 * 5)
+    env_cfg = variant_config("wristmimic", object_controller=oc)
+    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 4), env=env_cfg)
+    start_run(spec, tmp_path / "run", progress=False)
+    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    pose = [float(r["curriculum/object_gain"]) for r in rows]
+    weight = [float(r["curriculum/object_weight_gain"]) for r in rows]
+    assert pose == [1.0, 0.0, 0.0, 0.0] and weight == pytest.approx([1.0, 0.8, 0.6, 0.4])
+    env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
+    assert not env.has_object_controller and env.object_gain == 0.0 and not env.object_weight_gain

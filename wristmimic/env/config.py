@@ -128,6 +128,10 @@ class ObjectControllerConfig:
     zero_by_frames: int = 150_000
     """The gain is also capped by 1 - frames / zero_by_frames: exactly zero after this many training frames
     (a fixed count, not a share of the budget, so a run resumed with a larger budget continues bit for bit)."""
+    weight_zero_by_frames: int = 0
+    """A separate gravity ramp (ManipTrans): the weight-carrying part of the wrench (m g) keeps the gain
+    max(pose gain, 1 - frames / weight_zero_by_frames), reaching exactly zero after this many frames, so the
+    policy learns to hold and move the object before it learns to lift it. 0: the weight follows the pose gain."""
 
 
 @dataclass(frozen=True)

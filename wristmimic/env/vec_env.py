@@ -214,6 +214,9 @@ class WristMimicEnv:
         self.eval_info = True
         """Put the evaluation errors (``info["eval"]``) in every step's info; training turns it off (unused there)."""
         self.object_gain = 0.0
+        self.object_weight_gain: float | None = None
+        """Gain of the controller's weight support (``ObjectControllerConfig.weight_zero_by_frames``); None: the
+        same as :attr:`object_gain`."""
         """Gain of the virtual object controller (0: off). Set by the training curriculum; needs a scene built
         with ``SceneConfig(object_actuators=True)``."""
         self.on_step: Callable[[SimState, torch.Tensor], None] | None = None
@@ -503,7 +506,7 @@ class WristMimicEnv:
 
     def _step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
         self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(self.device, torch.float32))
-        if self.object_gain > 0.0:
+        if self.object_gain > 0.0 or (self.object_weight_gain or 0.0) > 0.0:
             self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench().flatten(1)
         self.backend.step(self._ctrl, self.scene.config.substeps)
         self.frame += 1
@@ -554,10 +557,13 @@ class WristMimicEnv:
         qpos, qvel = self.backend.qpos.to(torch.float32), self.backend.qvel.to(torch.float32)
         pos, quat = qpos[:, self._obj_pos_q], qpos[:, self._obj_quat_q]
         lin, ang = qvel[:, self._obj_lin_v], qvel[:, self._obj_ang_v]
-        acc = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin) + self._gravity
+        pd = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin)
         rot = quat_to_rotvec(quat_mul(quat_conj(quat), r.obj_quat[f]))  # local frame
         alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)
-        return self.object_gain * torch.cat([self._obj_mass * acc, self._obj_inertia * alpha], -1)
+        if self.object_weight_gain is None:
+            return self.object_gain * torch.cat([self._obj_mass * (pd + self._gravity), self._obj_inertia * alpha], -1)
+        acc = self.object_gain * pd + self.object_weight_gain * self._gravity
+        return torch.cat([self._obj_mass * acc, self.object_gain * self._obj_inertia * alpha], -1)
 
     def _sim_hand(self, s: SimState) -> torch.Tensor:
         """(N, 2) bool: any body of the left / right hand touches a dynamic object."""

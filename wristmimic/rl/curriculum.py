@@ -46,6 +46,15 @@ class ObjectCurriculum:
             self.zero_frames = frames
         return self.gain
 
+    def weight_gain(self, frames: int) -> float:
+        """Gain of the weight support (``weight_zero_by_frames``; else the pose gain) after ``frames`` frames."""
+        c = self.cfg
+        if not c.enabled or c.weight_zero_by_frames <= 0:
+            return self.gain
+        ramp = max(0.0, 1.0 - frames / c.weight_zero_by_frames) * c.initial_gain
+        gain = max(self.gain, ramp)
+        return 0.0 if gain < c.min_gain else gain
+
     def state_dict(self) -> dict[str, Any]:
         return {"gain": self.gain, "adaptive": self._adaptive, "zero_frames": self.zero_frames}
 

@@ -107,6 +107,9 @@ class Runner:
         if self.curriculum.gain > 0 and not env.has_object_controller:
             raise ValueError("the object curriculum needs a training scene with SceneConfig(object_actuators=True)")
         env.object_gain = self.curriculum.gain
+        self._weight_ramp = env.cfg.object_controller.enabled and env.cfg.object_controller.weight_zero_by_frames > 0
+        if self._weight_ramp:
+            env.object_weight_gain = self.curriculum.weight_gain(0)
         env.eval_info = False  # evaluation errors are computed by the periodic evaluation's own environment
         self._eval_env: WristMimicEnv | None = None
         self.stop_requested = False
@@ -140,7 +143,7 @@ class Runner:
             with stop_on_ctrl_c(self), train_progress(desc, self.frames, max_frames, progress) as bar:
                 while self.frames < max_frames and not self.stop_requested:
                     t0 = time.perf_counter()
-                    gain = self.env.object_gain
+                    gain, weight_gain = self.env.object_gain, self.env.object_weight_gain
                     if self.cfg.final_std > 0.0:  # the sigma schedule (a fixed sigma: a buffer, saved with the policy)
                         self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
                     episode_row = self.collect()
@@ -154,12 +157,16 @@ class Runner:
                     self.frames += self.cfg.batch_size
                     terminations = sum(v for k, v in episode_row.items() if k.startswith("termination/"))
                     self.env.object_gain = self.curriculum.update(terminations, self.cfg.batch_size, self.frames)
+                    if self._weight_ramp:
+                        self.env.object_weight_gain = self.curriculum.weight_gain(self.frames)
                     evaluation = self.periodic_eval() if self._eval_due() else {}
                     self._keep_best(evaluation)
                     self.seconds += time.perf_counter() - t0
                     row = {"iteration": self.iteration, "frames": self.frames, "seconds": self.seconds}
                     row |= {"frames_per_s": self.cfg.batch_size / dt, **episode_row, **losses}
                     row["curriculum/object_gain"] = gain
+                    if self._weight_ramp:
+                        row["curriculum/object_weight_gain"] = weight_gain
                     row |= {k: evaluation.get(k, math.nan) for k in EVAL_COLUMNS}
                     try:
                         self.metrics.write(row)
@@ -467,6 +474,8 @@ class Runner:
         else:
             self.curriculum.gain = 0.0
         self.env.object_gain = self.curriculum.gain
+        if self._weight_ramp:
+            self.env.object_weight_gain = self.curriculum.weight_gain(self.frames)
         self.storage.step = int(state["storage_step"])
         self.metrics = MetricsCsv(self.run_dir / "metrics.csv", keep_until=self.iteration)
         self.saved_iteration = self.iteration

@@ -155,7 +155,9 @@ class WholeBodyIK:
         self._jr = np.zeros((3, nv))
         arm = [self.bid[f"{s}_{k}"] for s, _ in SIDES for k in ("Shoulder", "Elbow")]
         self.arm_geoms = [
-            int(g) for g in np.flatnonzero(np.isin(m.geom_bodyid, arm)) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
+            int(g)
+            for g in np.flatnonzero(np.isin(m.geom_bodyid, arm))
+            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
         ]
 
     # -- helpers -----------------------------------------------------------------------------------------------
