@@ -108,6 +108,26 @@ def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: t
                 build_scene(ds, "sub1_box_000", bad)
 
 
+def test_every_colliding_geom_has_friction_even_where_the_source_says_condim_1(tmp_path: Path) -> None:
+    """SkillMimic's ParaHome humanoid says condim 1 (frictionless in MuJoCo; Isaac Gym ignores it): the scene gives
+    every colliding geom (humanoid, floor, supports, objects) sliding friction; runs recorded before keep it."""
+    folder = write_parahome_folder(tmp_path / "ph")
+    for xml in (folder / "humanoids").glob("*.xml"):
+        xml.write_text(xml.read_text().replace("<geom ", '<geom condim="1" '))
+    ph = tmp_path / "ph.h5"
+    convert_skillmimic_parahome(folder, ph, options=ConvertOptions(hull_cache_dir=tmp_path / "c", show_progress=False))
+    with open_dataset(ph) as ds:
+        sid = ds.sequence_ids[0]
+        new, old = build_scene(ds, sid), build_scene(ds, sid, scene_config_from_dict({"timestep": 1 / 120}))
+    m = new.model
+    colliding = (m.geom_contype | m.geom_conaffinity) > 0
+    hands = m.geom_condim == 4
+    assert colliding.sum() > 10 and hands.sum() > 10 and (m.geom_condim[colliding & ~hands] == 3).all()
+    assert m.geom_condim[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")] == 3
+    humanoid = np.isin(old.model.geom_bodyid, old.body_ids)
+    assert (old.model.geom_condim[humanoid] == 1).all()  # the source's, as before
+
+
 def test_parahome_scene_has_fixed_supports(synth_files: tuple[Path, Path]) -> None:
     with open_dataset(synth_files[1]) as ds:
         sc = build_scene(ds, "s1_move_box")

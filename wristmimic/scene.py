@@ -76,6 +76,10 @@ class SceneConfig:
     Isaac Gym. With 3, a box squeezed between two palms pivots about the line between them: on synth_default the
     recipe's policies tipped the box forward during the lift (rotation error 44-53 deg at 600k frames); with 4 and
     0.015 m (and ``weights.orot`` 1.0) the box stays level (8 deg) and 99.6 % of trials succeed after 405k frames."""
+    contact_condim: int | None = 3
+    """Contact dimensionality of every other colliding geom (humanoid, floor, object hulls): 3 = sliding friction.
+    None keeps the source MJCF's: SkillMimic's ParaHome humanoid says condim 1 (frictionless in MuJoCo; Isaac Gym,
+    which it was written for, ignores condim), so its feet slid on the floor and objects on their supports."""
     hand_torsional_friction: float = 0.015
     """Torsional friction coefficient (m) of the hand geoms when ``hand_condim`` >= 4: about mu * (2/3) r for a
     contact patch of radius r ~ 2 cm (MuJoCo's default is 0.005)."""
@@ -198,7 +202,7 @@ def finger_ranges(skel: Skeleton, roles: dict[str, np.ndarray]) -> dict[int, np.
     return out
 
 
-LEGACY_SCENE_DEFAULTS: dict = {"hand_condim": 3, "hand_torsional_friction": 0.005}
+LEGACY_SCENE_DEFAULTS: dict = {"hand_condim": 3, "hand_torsional_friction": 0.005, "contact_condim": None}
 """What a run's recorded ``scene_config`` meant when it predates a field (sliding friction only on the hands)."""
 
 
@@ -249,6 +253,8 @@ def _humanoid(
         for g in body.geoms:
             g.density = cfg.density
             g.contype, g.conaffinity = HUMANOID_CONTYPE, HUMANOID_CONAFFINITY
+            if cfg.contact_condim is not None:
+                g.condim = cfg.contact_condim
             if body.name in hands and cfg.hand_condim != 3:
                 g.condim = cfg.hand_condim
                 g.friction = [float(g.friction[0]), cfg.hand_torsional_friction, float(g.friction[2])]
@@ -287,6 +293,8 @@ def _add_object(
         )
         if friction is not None:
             g.friction = [float(friction), 0.005, 0.0001]
+        if cfg.contact_condim is not None:
+            g.condim = cfg.contact_condim
     if cfg.visual_meshes and not rec.inferred:
         mesh = spec.add_mesh(
             name=f"{oid}_visual",
@@ -337,7 +345,7 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
     _set_solver(spec, cfg)
     gains = _humanoid(spec, skel, hum.roles, cfg, own_ranges=bool(hum.hand))
     if cfg.floor:
-        spec.worldbody.add_geom(
+        floor = spec.worldbody.add_geom(
             name="floor",
             type=mujoco.mjtGeom.mjGEOM_PLANE,
             size=[50, 50, 0.1],
@@ -345,6 +353,8 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
             conaffinity=WORLD_CONAFFINITY,
             rgba=[0.8, 0.9, 0.8, 1],
         )
+        if cfg.contact_condim is not None:
+            floor.condim = cfg.contact_condim
     obj_pos = seq.array("object_pos", slice(0, 1))[0]
     obj_quat = seq.array("object_quat", slice(0, 1))[0]
     records = {oid: ds.object(oid) for oid in seq.object_ids}
