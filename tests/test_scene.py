@@ -128,6 +128,27 @@ def test_every_colliding_geom_has_friction_even_where_the_source_says_condim_1(t
     assert (old.model.geom_condim[humanoid] == 1).all()  # the source's, as before
 
 
+def test_humanoid_keeps_its_mjcf_densities_unless_one_is_given(tmp_path: Path) -> None:
+    """PHC and SkillMimic weigh capsules by body part; the scene keeps those masses (runs recorded before: 1000)."""
+    folder = write_parahome_folder(tmp_path / "ph")
+    for xml in (folder / "humanoids").glob("*.xml"):
+        text = xml.read_text()
+        xml.write_text(text.replace('<geom type="sphere"', '<geom density="4629.63" type="sphere"', 1))
+    ph = tmp_path / "ph.h5"
+    convert_skillmimic_parahome(folder, ph, options=ConvertOptions(hull_cache_dir=tmp_path / "c", show_progress=False))
+    with open_dataset(ph) as ds:
+        sid = ds.sequence_ids[0]
+        source = mujoco.MjModel.from_xml_string(ds.humanoid(ds.sequence(sid).humanoid_id).mjcf)
+        scenes = {
+            "default": build_scene(ds, sid),
+            "legacy": build_scene(ds, sid, scene_config_from_dict({"timestep": 1 / 120})),
+            "uniform": build_scene(ds, sid, SceneConfig(density=1000.0)),
+        }
+    mass = {k: float(sc.model.body_mass[sc.body_ids].sum()) for k, sc in scenes.items()}
+    assert mass["default"] == pytest.approx(float(source.body_mass[1:].sum()), rel=1e-6)
+    assert mass["legacy"] == pytest.approx(mass["uniform"]) and mass["default"] > mass["uniform"] + 1.0
+
+
 def test_parahome_scene_has_fixed_supports(synth_files: tuple[Path, Path]) -> None:
     with open_dataset(synth_files[1]) as ds:
         sc = build_scene(ds, "s1_move_box")

@@ -2,7 +2,7 @@
 
 The humanoid comes from the MJCF stored in the canonical file, re-actuated for MuJoCo: its joint
 ``stiffness``/``damping`` (Isaac Gym PD gains) become position actuators (kp, kv) with the paper's gains per
-body part, joint springs and damping are zeroed, armature 0.02, density 1000, finger ranges as InterMimic (a
+body part, joint springs and damping are zeroed, armature 0.02, the MJCF's geom densities, finger ranges as InterMimic (a
 humanoid with a swapped hand, :mod:`wristmimic.humanoid.hands`, keeps the ranges its MJCF carries), and
 self-collision is off. Each dynamic object is a free body with one mesh geom per coacd hull and the stored
 mass/inertia (from the visual mesh, not the hull sum); static objects (real or inferred supports) are fixed at
@@ -68,7 +68,11 @@ class SceneConfig:
     cone: str = "pyramidal"
     """Friction cone: pyramidal (MuJoCo's default) or elliptic."""
     armature: float = 0.02
-    density: float = 1000.0
+    density: float | None = None
+    """Density (kg/m^3) of every humanoid geom; None keeps the MJCF's own. PHC's and SkillMimic's humanoids weigh
+    their capsules by part (pelvis 4629.6, thighs 2040.8, shins 1234.6, 1000-1100 elsewhere): sub2 of OMOMO then
+    weighs 77.1 kg and ParaHome's s110 45.1 kg; a uniform 1000 (the value before 2026-12-02, which runs recorded
+    then keep) made them 49.4 and 27.3 kg, so sub2 carried a table of 41 % of its own mass."""
     gains: Gains = field(default_factory=Gains)
     hand_condim: int = 4
     """Contact dimensionality of the hand geoms (palms and fingers): 4 adds torsional friction to MuJoCo's sliding
@@ -202,7 +206,12 @@ def finger_ranges(skel: Skeleton, roles: dict[str, np.ndarray]) -> dict[int, np.
     return out
 
 
-LEGACY_SCENE_DEFAULTS: dict = {"hand_condim": 3, "hand_torsional_friction": 0.005, "contact_condim": None}
+LEGACY_SCENE_DEFAULTS: dict = {
+    "hand_condim": 3,
+    "hand_torsional_friction": 0.005,
+    "contact_condim": None,
+    "density": 1000.0,
+}
 """What a run's recorded ``scene_config`` meant when it predates a field (sliding friction only on the hands)."""
 
 
@@ -251,7 +260,8 @@ def _humanoid(
     hands = {skel.body_names[b] for side in ("left_hand", "right_hand") for b in roles.get(side, [])}
     for body in spec.bodies:
         for g in body.geoms:
-            g.density = cfg.density
+            if cfg.density is not None:
+                g.density = cfg.density
             g.contype, g.conaffinity = HUMANOID_CONTYPE, HUMANOID_CONAFFINITY
             if cfg.contact_condim is not None:
                 g.condim = cfg.contact_condim
