@@ -214,11 +214,11 @@ class WristMimicEnv:
         self.eval_info = True
         """Put the evaluation errors (``info["eval"]``) in every step's info; training turns it off (unused there)."""
         self.object_gain = 0.0
+        """Gain of the virtual object controller (0: off). Set by the training curriculum; needs a scene built
+        with ``SceneConfig(object_actuators=True)``."""
         self.object_weight_gain: float | None = None
         """Gain of the controller's weight support (``ObjectControllerConfig.weight_zero_by_frames``); None: the
         same as :attr:`object_gain`."""
-        """Gain of the virtual object controller (0: off). Set by the training curriculum; needs a scene built
-        with ``SceneConfig(object_actuators=True)``."""
         self.on_step: Callable[[SimState, torch.Tensor], None] | None = None
         """Called in :meth:`step` with the state just reached (before any auto-reset) and the actions (a recorder:
         ``wristmimic.evaluate.export``); ``steps`` is then the frame reached, ``_ctrl`` the PD targets applied."""

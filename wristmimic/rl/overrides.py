@@ -87,7 +87,7 @@ def with_overrides(spec: TrainSpec, overrides: list[str] | tuple[str, ...]) -> T
     try:
         new_env = env_config_from_dict(cfg["env"])
         check_env_config(new_env)
-        ppo = from_jsonable(PPOConfig, {k: tuple(v) if isinstance(v, list) else v for k, v in cfg["ppo"].items()})
+        ppo = from_jsonable(PPOConfig, cfg["ppo"])  # lists become the tuples the fields declare
         scene = scene_config_from_dict(cfg["scene_config"])
     except (ValueError, TypeError) as exc:
         raise InputError(None, "--set", str(exc).splitlines()[0]) from None
