@@ -147,3 +147,45 @@ def test_state_dict_round_trip_continues_identically(files) -> None:
     for act, ra in zip(actions[4:], rest_a, strict=True):
         rb = b.step(act)
         assert torch.equal(ra[0], rb[0]) and torch.equal(ra[1], rb[1]) and torch.equal(ra[2], rb[2])
+
+
+def test_state_bank_restores_states_the_policy_reached_and_survives_a_checkpoint(files) -> None:
+    """Mid-clip training starts restore banked states (reached from frame 0); evaluation never uses the bank;
+    a checkpoint round trip continues identically with the bank on."""
+    from dataclasses import replace
+
+    from wristmimic.evaluate.trials import eval_env_config
+
+    path, sid = files["smplx"]
+    base = EnvConfig()
+    cfg = replace(base, reset_frame0_prob=0.0, starts=replace(base.starts, bank=1.0, bank_size=2))
+    env = WristMimicEnv.from_file(path, sid, num_worlds=3, config=cfg, seed=0, nthread=1)
+    env.reset(start_frames=torch.tensor([0, 0, 10]))  # worlds 0, 1 descend from frame 0, world 2 does not
+    zero = torch.zeros(3, env.action_size)
+    reached = []
+    for _ in range(6):
+        env.step(zero)
+        reached.append(env.backend.qpos.clone())
+    f = 3
+    banked = env.bank.qpos[f][env.bank.filled[f]]
+    assert len(banked) >= 1
+    assert all(any(torch.equal(b, reached[f - 1][i]) for i in (0, 1)) for b in banked)  # only frame-0 lineages
+    assert not env.bank.filled[13:].any()  # world 2 (from frame 10, a reference start) recorded nothing
+    env.sample_start_frames = lambda n: torch.full((n,), f)  # type: ignore[method-assign]
+    env._reset_worlds(torch.tensor([True, False, False]))
+    del env.sample_start_frames
+    assert any(torch.equal(env.backend.qpos[0], b) for b in banked) and bool(env._lineage[0])
+    # the reference's state at frame 3 is not what the policy reached (else this test could not fail)
+    assert not torch.equal(env.reference_state(torch.tensor([f]))[0][0], env.backend.qpos[0])
+    assert eval_env_config(cfg).starts.bank == 0.0
+    # checkpoint round trip with a bank
+    gen = torch.Generator().manual_seed(1)
+    actions = [torch.rand(3, env.action_size, generator=gen) * 2 - 1 for _ in range(6)]
+    saved = env.state_dict()
+    rest = [env.step(a) for a in actions]
+    other = WristMimicEnv.from_file(path, sid, num_worlds=3, config=cfg, seed=7, nthread=1)
+    other.reset()
+    other.load_state_dict(saved)
+    for a, ra in zip(actions, rest, strict=True):
+        rb = other.step(a)
+        assert torch.equal(ra[0], rb[0]) and torch.equal(ra[1], rb[1])

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from wristmimic.env.config import StartSamplingConfig
-from wristmimic.env.starts import AdaptiveStarts
+from wristmimic.env.starts import AdaptiveStarts, StateBank
 
 
 def test_starts_are_uniform_without_failures_and_stay_in_range() -> None:
@@ -40,3 +40,31 @@ def test_sampling_is_seeded() -> None:
     a = s.sample(100, torch.Generator().manual_seed(3))
     b = s.sample(100, torch.Generator().manual_seed(3))
     assert torch.equal(a, b)
+
+
+def test_state_bank_draws_only_recorded_states_of_the_frame() -> None:
+    bank = StateBank(num_frames=6, size=4, nq=3, nv=2)
+    gen = torch.Generator().manual_seed(0)
+    have, _, _ = bank.draw(torch.tensor([0, 3, 5]), gen)
+    assert not have.any()  # nothing banked yet
+    qpos = torch.arange(9, dtype=torch.float64).reshape(3, 3)
+    qvel = -torch.arange(6, dtype=torch.float64).reshape(3, 2)
+    bank.record(torch.tensor([3, 3, 5]), torch.tensor([True, True, False]), qpos, qvel, gen)
+    have, q, v = bank.draw(torch.tensor([3, 5, 3, 3]).repeat(50), gen)
+    assert have.tolist() == [True, False, True, True] * 50
+    rows = {tuple(r) for r in q[have].tolist()}
+    assert rows <= {tuple(qpos[0].tolist()), tuple(qpos[1].tolist())} and len(rows) == 2  # either, never world 2's
+    for qq, vv in zip(q[have], v[have], strict=True):  # position and velocity of the same world
+        i = int(qq[0]) // 3
+        assert torch.equal(vv, qvel[i])
+
+
+def test_legacy_runs_have_no_state_bank_and_bad_values_are_refused() -> None:
+    from dataclasses import replace
+
+    from wristmimic.env.config import EnvConfig, check_env_config, env_config_from_dict
+
+    assert env_config_from_dict({"starts": {"adaptive": True}}).starts.bank == 0.0
+    for bad in (dict(bank=1.5), dict(bank=-0.1), dict(bank_size=0)):
+        with pytest.raises(ValueError, match="bank"):
+            check_env_config(replace(EnvConfig(), starts=replace(EnvConfig().starts, **bad)))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -136,3 +137,18 @@ def test_training_logs_the_weight_ramp_and_evaluation_never_applies_it(dataset: 
     assert pose == [1.0, 0.0, 0.0, 0.0] and weight == pytest.approx([1.0, 0.8, 0.6, 0.4])
     env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
     assert not env.has_object_controller and env.object_gain == 0.0 and not env.object_weight_gain
+
+
+def test_training_with_a_state_bank_logs_its_share_and_records_it(dataset: Path, tmp_path: Path) -> None:
+    base = variant_config("wristmimic")
+    env_cfg = replace(base, reset_frame0_prob=0.5, starts=replace(base.starts, bank=1.0, bank_size=4))
+    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 4), env=env_cfg)
+    start_run(spec, tmp_path / "run", progress=False)
+    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    shares = [float(r["starts/banked"]) for r in rows]
+    assert len(shares) == 4 and all(math.isnan(s) or 0.0 <= s <= 1.0 for s in shares)
+    meta = load_eval_policy(tmp_path / "run").metadata
+    assert meta["env"]["starts"]["bank"] == 1.0  # recorded in the run ...
+    assert make_env(meta, 2).bank is None  # ... and never used by evaluation

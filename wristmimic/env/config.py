@@ -150,6 +150,11 @@ class StartSamplingConfig:
     """A bin's weight includes the failures of this many bins from it on."""
     kernel_lambda: float = 0.8
     """Weight lambda^k of the failures k bins later."""
+    bank: float = 0.0
+    """Share of the starts at a frame f > 0 that restore a state the policy itself reached at f (from a frame-0
+    start; :class:`wristmimic.env.starts.StateBank`) instead of the reference's, where one is banked. 0: off."""
+    bank_size: int = 16
+    """States kept per frame (the newest, in random slots)."""
 
 
 @dataclass(frozen=True)
@@ -258,7 +263,7 @@ LEGACY_ENV_DEFAULTS: dict = {
     "velocity_feedforward": False,
     "gravity_feedforward": False,
     "object_controller": {"enabled": False},
-    "starts": {"adaptive": False},
+    "starts": {"adaptive": False, "bank": 0.0},
     "weights": {"root_pos": 0.0, "root_rot": 0.0},
     "feedforward": {"enabled": False},
 }
@@ -291,6 +296,8 @@ def check_env_config(cfg: EnvConfig) -> None:
     st = cfg.starts
     if st.bin_frames < 1 or st.kernel < 1 or not 0 < st.alpha <= 1 or not 0 <= st.uniform <= 1:
         raise ValueError("starts: bin_frames and kernel >= 1, alpha in (0, 1], uniform in [0, 1]")
+    if not 0 <= st.bank <= 1 or st.bank_size < 1:
+        raise ValueError("starts: bank in [0, 1], bank_size >= 1")
 
 
 def variant_config(name: str, **overrides: object) -> EnvConfig:

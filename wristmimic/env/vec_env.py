@@ -37,7 +37,7 @@ from wristmimic.env.observations import (
 from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import CONSTANTS as REWARD_CONSTANTS
 from wristmimic.env.rewards import RewardInputs, compute_reward, ig_weights, sq_dists
-from wristmimic.env.starts import AdaptiveStarts
+from wristmimic.env.starts import AdaptiveStarts, StateBank
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
 from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_to_matrix, quat_to_rotvec
 from wristmimic.errors import InputError
@@ -136,6 +136,15 @@ class WristMimicEnv:
         self.steps = torch.zeros(N, dtype=torch.long, device=dev)
         self.lost = ContactLostCounter(N, dev)
         self.starts = AdaptiveStarts(self.cfg.starts, reference.num_frames, dev) if self.cfg.starts.adaptive else None
+        self.bank: StateBank | None = None
+        """States the policy reached, restored by some mid-clip starts (``StartSamplingConfig.bank`` > 0)."""
+        if self.cfg.starts.bank > 0:
+            m0 = scene.model
+            self.bank = StateBank(reference.num_frames, self.cfg.starts.bank_size, m0.nq, m0.nv, dev)
+        self._lineage = torch.zeros(N, dtype=torch.bool, device=dev)
+        self.start_counts = torch.zeros(2, dtype=torch.long, device=dev)
+        """Sampled starts after frame 0 and those restored from the bank, since construction (when the bank is on)."""
+        """(N,) the world's state descends by simulation from a frame-0 start (what the bank records)."""
         roles = scene.humanoid.roles
 
         def idx(a: object) -> torch.Tensor:
@@ -364,6 +373,15 @@ class WristMimicEnv:
         sampled start frames. Works on the whole batch with masks: no host synchronisation."""
         f = self.sample_start_frames(self.num_worlds) if frames is None else frames.to(torch.long)
         qpos, qvel = self.reference_state(f)
+        lineage = f == 0
+        if self.bank is not None and frames is None:  # sampled (training) starts only
+            have, bq, bv = self.bank.draw(f, self._gen)
+            u = torch.rand(self.num_worlds, generator=self._gen, device=self.device)
+            use = have & (f > 0) & (u < self.cfg.starts.bank)
+            qpos, qvel = torch.where(use[:, None], bq, qpos), torch.where(use[:, None], bv, qvel)
+            lineage |= use
+            self.start_counts += torch.stack([(mask & (f > 0)).sum(), (mask & use).sum()])
+        self._lineage = torch.where(mask, lineage, self._lineage)
         self.backend.reset(mask, qpos, qvel)
         r, col = self.ref, mask[:, None]
         self.frame = torch.where(mask, f, self.frame)
@@ -522,6 +540,8 @@ class WristMimicEnv:
         terminated, reason = self._terminations(s, rf, hand, phase)
         if self.starts is not None:
             self.starts.record(self.frame, terminated)
+        if self.bank is not None:
+            self.bank.record(self.frame, self._lineage & ~terminated, self.backend.qpos, self.backend.qvel, self._gen)
         T = self.ref.num_frames
         truncated = ((self.frame >= T - 1) | (self.steps >= self.cfg.max_episode_frames)) & ~terminated
         done = terminated | truncated
@@ -662,6 +682,8 @@ class WristMimicEnv:
             "prev_obj_vel": self._prev_obj_vel.clone(),
             "generator": self._gen.get_state(),
             "start_failures": None if self.starts is None else self.starts.failures.clone(),
+            "lineage": self._lineage.clone(),
+            **({} if self.bank is None else self.bank.state_dict()),
             "sequence_id": self.scene.sequence_id,
             "num_worlds": self.num_worlds,
         }
@@ -683,6 +705,10 @@ class WristMimicEnv:
         self._gen.set_state(state["generator"].cpu())  # type: ignore[union-attr]
         if self.starts is not None and state.get("start_failures") is not None:
             self.starts.failures[:] = state["start_failures"]  # type: ignore[index]
+        if state.get("lineage") is not None:
+            self._lineage[:] = state["lineage"]  # type: ignore[index]
+        if self.bank is not None:
+            self.bank.load_state_dict(state)  # type: ignore[arg-type]
 
     def observe(self) -> torch.Tensor:
         """The current observation of every world (e.g. after :meth:`load_state_dict`)."""

@@ -144,6 +144,7 @@ class Runner:
                 while self.frames < max_frames and not self.stop_requested:
                     t0 = time.perf_counter()
                     gain, weight_gain = self.env.object_gain, self.env.object_weight_gain
+                    starts_before = self.env.start_counts.clone()
                     if self.cfg.final_std > 0.0:  # the sigma schedule (a fixed sigma: a buffer, saved with the policy)
                         self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
                     episode_row = self.collect()
@@ -167,6 +168,9 @@ class Runner:
                     row["curriculum/object_gain"] = gain
                     if self._weight_ramp:
                         row["curriculum/object_weight_gain"] = weight_gain
+                    if self.env.bank is not None:  # share of this iteration's mid-clip starts restored from the bank
+                        later, banked = (self.env.start_counts - starts_before).tolist()
+                        row["starts/banked"] = banked / later if later else math.nan
                     row |= {k: evaluation.get(k, math.nan) for k in EVAL_COLUMNS}
                     try:
                         self.metrics.write(row)
