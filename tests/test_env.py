@@ -189,3 +189,39 @@ def test_state_bank_restores_states_the_policy_reached_and_survives_a_checkpoint
     for a, ra in zip(actions, rest, strict=True):
         rb = other.step(a)
         assert torch.equal(ra[0], rb[0]) and torch.equal(ra[1], rb[1])
+
+
+def test_ground_reference_lowers_the_humanoid_onto_the_floor(files) -> None:
+    from dataclasses import replace
+
+    from wristmimic.env.grounding import floor_clearance
+
+    path, sid = files["smplx"]
+    plain = WristMimicEnv.from_file(path, sid, num_worlds=1, nthread=1)
+    env = WristMimicEnv.from_file(
+        path, sid, num_worlds=1, config=replace(EnvConfig(), ground_reference=True), nthread=1
+    )
+    r0, r1, dz = plain.ref, env.ref, env.ref.grounded_by
+    assert r0.grounded_by is None and dz is not None
+    args = lambda r, up=0.0: (  # noqa: E731
+        r.root_pos.double().numpy() + [0.0, 0.0, up],
+        r.root_quat.double().numpy(),
+        r.joint_angles.double().numpy(),
+    )
+    assert floor_clearance(env.scene, *args(r0)) == pytest.approx(dz, abs=1e-5)
+    assert floor_clearance(env.scene, *args(r0, 0.05)) == pytest.approx(dz + 0.05, abs=1e-5)  # it measures height
+    assert floor_clearance(env.scene, *args(r1)) == pytest.approx(0.0, abs=1e-5)  # grounded: feet on the floor
+    torch.testing.assert_close(r1.body_pos[..., 2], r0.body_pos[..., 2] - dz)
+    torch.testing.assert_close(r1.body_pos[..., :2], r0.body_pos[..., :2])
+    assert torch.equal(r1.obj_pos, r0.obj_pos) and torch.equal(r1.joint_angles, r0.joint_angles)  # objects stay
+    with pytest.raises(ValueError, match="ground_reference"):
+        WristMimicEnv(plain.scene, plain.ref, 1, replace(EnvConfig(), ground_reference=True), nthread=1)
+
+
+def test_sub2_reference_floats_above_the_floor_and_grounding_measures_it(omomo_h5: Path) -> None:
+    """The fitted OMOMO humanoid's reference stands 1-2 cm above the floor (sub2: 1.4 cm median)."""
+    from dataclasses import replace
+
+    cfg = replace(EnvConfig(), ground_reference=True)
+    env = WristMimicEnv.from_file(omomo_h5, "sub2_largetable_000", num_worlds=1, config=cfg, nthread=1)
+    assert 0.005 < env.ref.grounded_by < 0.03

@@ -206,3 +206,21 @@ def test_scene_cli_exports_loadable_mjcf(synth_files: tuple[Path, Path], tmp_pat
     assert m.nu == 153 and m.numeric_data[0] == 4
     r = CliRunner().invoke(app, ["scene", str(synth_files[0]), "nope", "-o", str(out)])
     assert r.exit_code == 1 and "nope" in r.stderr
+
+
+def test_object_density_scales_mass_and_inertia_and_bad_values_are_refused(synth_files: tuple[Path, Path]) -> None:
+    from wristmimic.errors import InputError
+
+    with open_dataset(synth_files[0]) as ds:
+        base = build_scene(ds, "sub1_box_000")
+        light = build_scene(ds, "sub1_box_000", SceneConfig(object_density=200.0))
+        (o,) = base.dynamic_objects
+        rec_density = ds.object(o.id).density
+        ratio = 200.0 / rec_density
+        assert light.model.body_mass[o.body_id] == pytest.approx(base.model.body_mass[o.body_id] * ratio)
+        np.testing.assert_allclose(light.model.body_inertia[o.body_id], base.model.body_inertia[o.body_id] * ratio)
+        humanoid = [b for b in range(base.model.nbody) if b != o.body_id]
+        np.testing.assert_array_equal(light.model.body_mass[humanoid], base.model.body_mass[humanoid])
+        for bad in (0.0, -5.0, float("nan")):
+            with pytest.raises(InputError, match="object_density"):
+                build_scene(ds, "sub1_box_000", SceneConfig(object_density=bad))

@@ -91,6 +91,11 @@ class SceneConfig:
     """Linear/angular damping of dynamic objects (free-joint dof damping)."""
     object_friction: float | None = None
     """Sliding friction of object geoms; None: the URDF's lateral friction, else MuJoCo's default 1."""
+    object_density: float | None = None
+    """Density (kg/m^3) of the dynamic objects: mass and inertia are scaled from the canonical file's (which
+    records the density it used, 1000 for OMOMO and ParaHome conversions); None keeps them. InterMimic trained
+    OMOMO with 200 (``omomo_train.yaml``; 1000 in ``omomo_train_new.yaml``): sub2's large table weighs 20.4 kg at
+    1000 and 4.1 kg at 200."""
     max_hull_vertices: int = 64
     floor: bool = True
     visual_meshes: bool = True
@@ -280,9 +285,10 @@ def _add_object(
         fj = body.add_freejoint(name=f"obj_{oid}")
         fj.damping = [cfg.object_damping, 0.0, 0.0]
         body.explicitinertial = True
-        body.mass = float(rec.mass)
+        scale = 1.0 if cfg.object_density is None else float(cfg.object_density) / float(rec.density)
+        body.mass = float(rec.mass) * scale
         body.ipos = np.asarray(rec.com, float)
-        body.fullinertia = np.asarray(rec.inertia, float)[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
+        body.fullinertia = scale * np.asarray(rec.inertia, float)[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
     for k, (v, f) in enumerate(rec.hulls()):
         mesh = spec.add_mesh(
             name=f"{oid}_hull{k}",
@@ -334,6 +340,12 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
         )
     if cfg.iterations < 1 or cfg.ls_iterations < 1 or not cfg.tolerance >= 0.0:
         raise InputError(None, "scene_config", "iterations and ls_iterations >= 1, tolerance >= 0")
+    for name in ("density", "object_density"):
+        v = getattr(cfg, name)
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise InputError(
+                None, f"scene_config.{name}", f"invalid value {v!r}", "None or a finite number > 0 (kg/m^3)"
+            )
     spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{cfg.solver.upper()}")
     spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{cfg.cone.upper()}")
     spec.option.iterations, spec.option.ls_iterations = int(cfg.iterations), int(cfg.ls_iterations)

@@ -251,6 +251,9 @@ class EnvConfig:
     gravity_feedforward: bool = False
     """Residual upper-body hinges (not legs, not fingers) also target + tau_g(q_ref) / kp, the gravity load at the
     reference pose over the hinge's stiffness (:mod:`wristmimic.env.gravity`): PD alone sags under gravity."""
+    ground_reference: bool = False
+    """Lower the humanoid's reference (root and bodies, not the objects) by its floor clearance, so its feet
+    stand on the simulated floor (:mod:`wristmimic.env.grounding`; sub2_largetable_000: 2.0 cm)."""
     residual_scale: float = 0.5
     """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
@@ -262,6 +265,7 @@ LEGACY_ENV_DEFAULTS: dict = {
     "action_mode": "absolute",
     "velocity_feedforward": False,
     "gravity_feedforward": False,
+    "ground_reference": False,
     "object_controller": {"enabled": False},
     "starts": {"adaptive": False, "bank": 0.0},
     "weights": {"root_pos": 0.0, "root_rot": 0.0},

@@ -65,18 +65,34 @@ class Reference:
     first_contact: torch.Tensor  # (2,) long
     t_c: int  # earliest first contact frame of the grasping hands, -1 if none
     grasp_hands: torch.Tensor  # (2,) bool
+    grounded_by: float | None = None
+    """Metres the humanoid was lowered by (``load_reference(ground=True)``); None: as recorded."""
 
     def to(self, device: str | torch.device) -> Reference:
         return Reference(**{k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in self.__dict__.items()})
 
 
 def load_reference(
-    ds: Dataset, scene: Scene, ig_points: int = 1024, seed: int = 0, max_frames: int | None = None
+    ds: Dataset,
+    scene: Scene,
+    ig_points: int = 1024,
+    seed: int = 0,
+    max_frames: int | None = None,
+    ground: bool = False,
 ) -> Reference:
     """Read the sequence of ``scene`` from ``ds`` and derive velocities, surface points and distances.
-    ``max_frames`` keeps only the first frames (a short task, e.g. for tests)."""
+    ``max_frames`` keeps only the first frames (a short task, e.g. for tests); ``ground`` lowers the humanoid
+    (root and bodies, not the objects) by its floor clearance (:mod:`wristmimic.env.grounding`)."""
     seq = ds.sequence(scene.sequence_id)
     s = seq.load(None if max_frames is None else slice(0, max(int(max_frames), 2)))
+    dz = 0.0
+    if ground:
+        from wristmimic.env.grounding import floor_clearance
+
+        angles0 = s.joint_angles.reshape(s.num_frames, -1).astype(np.float64)
+        dz = floor_clearance(scene, s.root_pos.astype(np.float64), s.root_quat.astype(np.float64), angles0)
+        s.root_pos = s.root_pos - np.array([0.0, 0.0, dz], dtype=s.root_pos.dtype)
+        s.body_pos = s.body_pos - np.array([0.0, 0.0, dz], dtype=s.body_pos.dtype)
     fps = float(ds.attrs.get("fps", 30.0))
     dyn_idx = [k for k, o in enumerate(scene.objects) if o.dynamic]
     obj_pos = s.object_pos[:, dyn_idx].astype(np.float64)
@@ -140,4 +156,5 @@ def load_reference(
         first_contact=torch.as_tensor(first),
         t_c=t_c,
         grasp_hands=torch.as_tensor(grasp),
+        grounded_by=dz if ground else None,
     )

@@ -118,6 +118,8 @@ class WristMimicEnv:
     ):
         self.scene, self.cfg = scene, config or EnvConfig()
         check_env_config(self.cfg)
+        if self.cfg.ground_reference and reference.grounded_by is None:
+            raise ValueError("ground_reference needs a reference loaded with load_reference(ground=True)")
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
         if isinstance(backend, str):
@@ -319,7 +321,9 @@ class WristMimicEnv:
         cfg = config or EnvConfig()
         with open_dataset(dataset) as ds:
             scene = build_scene(ds, sequence_id, scene_config)
-            ref = load_reference(ds, scene, cfg.ig_points, 0, max_frames)  # point subset independent of the env seed
+            ref = load_reference(
+                ds, scene, cfg.ig_points, 0, max_frames, ground=cfg.ground_reference
+            )  # point subset: seed 0
         return cls(scene, ref, num_worlds, cfg, seed, backend, nthread, backend_options)
 
     @property
