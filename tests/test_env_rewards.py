@@ -194,6 +194,21 @@ def test_root_factors_track_the_root_body_and_are_off_at_zero_weight() -> None:
     assert "root_pos" not in factor_names(variant_config("wristmimic", weights=PAPER_WEIGHTS))
 
 
+def test_feet_factor_tracks_the_feet_bodies_unweighted() -> None:
+    x = toy_inputs()
+    sets = BodySets.from_roles({**ROLES, "feet": np.array([1, 8])})  # toy: spine and a finger stand in
+    w = RewardWeights(root_pos=0.0, root_rot=0.0, feet_pos=100.0)
+    reward, info = compute_reward(x, sets, variant_config("wristmimic", weights=w))
+    base, _ = compute_reward(x, sets, variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    e = (x.ref_body_pos[:, [1, 8]] - x.body_pos[:, [1, 8]]).square().sum(-1).mean(-1)
+    assert (e > 0).all()  # the toy offsets move both bodies: the factor is not trivially 1
+    torch.testing.assert_close(info["reward/feet_pos"], torch.exp(-100.0 * e))
+    torch.testing.assert_close(reward, base * info["reward/feet_pos"])
+    assert "feet_pos" not in factor_names(variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    with pytest.raises(ValueError, match="feet"):
+        compute_reward(x, SETS, variant_config("wristmimic", weights=w))  # toy SETS name no feet
+
+
 def test_window_modulation_zeroes_exactly_the_grasping_arm() -> None:
     x = toy_inputs()
     x.in_window = torch.tensor([True, True, False])

@@ -35,6 +35,8 @@ class BodySets:
     """Left wrist and its fingers."""
     right_hand: torch.Tensor
     """Right wrist and its fingers."""
+    feet: torch.Tensor
+    """(4,) ankle and toe bodies of both legs (empty where the roles name none)."""
 
     @classmethod
     def from_roles(cls, roles: dict[str, np.ndarray]) -> BodySets:
@@ -51,6 +53,7 @@ class BodySets:
             contact_other=_idx(key),
             left_hand=_idx(roles["left_hand"]),
             right_hand=_idx(roles["right_hand"]),
+            feet=_idx(roles.get("feet", [])),
         )
 
     def to(self, device: torch.device | str) -> BodySets:

@@ -58,6 +58,11 @@ class RewardWeights:
     Off by default: 20 (with root_rot 2) gave 35.5 frames in frame-0 trials after 200k frames against 34.6."""
     root_rot: float = 0.0
     """Root (anchor) orientation, angle (rad); 0 turns the factor off."""
+    feet_pos: float = 0.0
+    """Feet (ankle and toe bodies), mean squared position error (m^2); 0 turns the factor off. The near/far
+    weighting leaves the feet, far from a carried object, with almost no position reward and the window lowers
+    their rotation lambda, so nothing asks the legs to step where the reference steps (DeepMimic's end-effector
+    term)."""
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ Every ``error_*`` function returns the raw error E of one factor, shape (N,); th
 :class:`wristmimic.env.config.RewardWeights`. :func:`compute_reward` returns the product and each factor as
 ``reward/<name>`` plus each raw error as ``error/<name>``, so a user sees which factor collapses.
 
-Factors (names): body_pos, body_rot, [root_pos, root_rot] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
+Factors (names): body_pos, body_rot, [root_pos, root_rot, feet_pos] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
 (cfg.finger_targets), obj_pos, obj_rot, ig, contact_hand, contact_other, joint_energy, obj_energy_lin,
 obj_energy_ang, contact_energy.
 Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface points, D hinge joints.
@@ -151,6 +151,11 @@ def error_root_pos(sq: torch.Tensor) -> torch.Tensor:
     return sq[:, 0]
 
 
+def error_feet_pos(sq: torch.Tensor, sets: BodySets) -> torch.Tensor:
+    """E_fp = mean over the feet bodies (ankles and toes) of |p_ref - p|^2 (m^2, unweighted)."""
+    return sq.index_select(1, sets.feet).mean(-1)
+
+
 def error_root_rot(ang: torch.Tensor) -> torch.Tensor:
     """E_rootr = angle(q_ref, q) of the root body (rad)."""
     return ang[:, 0]
@@ -254,7 +259,7 @@ def _lambda_rows(
 def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
     """Names of the reward factors present for this config, in product order."""
     names = ["body_pos", "body_rot"]
-    names += [n for n in ("root_pos", "root_rot") if getattr(cfg.weights, n) > 0]
+    names += [n for n in ("root_pos", "root_rot", "feet_pos") if getattr(cfg.weights, n) > 0]
     if cfg.wrist_terms:
         names += ["wrist_pos", "wrist_rot"]
     if cfg.finger_targets:
@@ -287,6 +292,10 @@ def compute_reward(
         errors["root_pos"], lams["root_pos"] = error_root_pos(sq), w.root_pos
     if w.root_rot > 0:
         errors["root_rot"], lams["root_rot"] = error_root_rot(ang), w.root_rot
+    if w.feet_pos > 0:
+        if not sets.feet.numel():
+            raise ValueError("weights.feet_pos > 0 needs a humanoid whose roles name its feet")
+        errors["feet_pos"], lams["feet_pos"] = error_feet_pos(sq, sets), w.feet_pos
     if cfg.wrist_terms:
         errors["wrist_pos"], lams["wrist_pos"] = error_wrist_pos(sq, sets), w.gwp
         errors["wrist_rot"], lams["wrist_rot"] = error_wrist_rot(ang, sets), w.gwr
