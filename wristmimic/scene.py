@@ -104,6 +104,9 @@ class SceneConfig:
     """Six force/torque motors on each dynamic object's free joint (``voc_<object>_<k>``, world force, local
     torque): the training-only virtual object controller drives them. Training adds them to its own scene;
     ``config.json``, evaluation and viewers never have them."""
+    root_actuators: bool = False
+    """Six force/torque motors on the humanoid root's free joint (``rac_<k>``, world force, local torque) for the
+    training-only root assist (``EnvConfig.root_assist``); like ``object_actuators``, training scenes only."""
 
     @property
     def control_dt(self) -> float:
@@ -391,6 +394,15 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
                 act.trntype = mujoco.mjtTrn.mjTRN_JOINT
                 act.gear = [float(i == k) for i in range(6)]
                 act.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
+    if cfg.root_actuators:
+        free = [j.name for j in spec.joints if j.type == mujoco.mjtJoint.mjJNT_FREE and not j.name.startswith("obj_")]
+        if not free:
+            raise InputError(ds.path, f"sequences/{sequence_id}", "root_actuators: the humanoid has no free root joint")
+        for k in range(6):
+            act = spec.add_actuator(name=f"rac_{k}", target=free[0])
+            act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+            act.gear = [float(i == k) for i in range(6)]
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
     spec.add_numeric(name="wristmimic_control_substeps", data=[float(cfg.substeps)])
     spec.add_text(name="wristmimic_sequence", data=sequence_id)
     try:

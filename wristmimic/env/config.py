@@ -140,6 +140,35 @@ class ObjectControllerConfig:
 
 
 @dataclass(frozen=True)
+class RootAssistConfig:
+    """Training-only root assist: a PD wrench on the humanoid's root (pelvis) pulling it toward the reference's
+    root pose, as the virtual object controller pulls the object (a "hand of god" curriculum for locomotion;
+    residual force control). Its gain falls linearly from ``initial_gain`` to exactly 0 at ``zero_by_frames``;
+    evaluation and viewers never apply it (their scenes have no root motors)."""
+
+    enabled: bool = False
+    """Add six motors on the root's free joint to the training scene and drive them."""
+    kp: float = 100.0
+    """Position gain (1/s^2), times the humanoid's total mass: world force."""
+    kd: float = 20.0
+    """Linear velocity gain (1/s), times the total mass."""
+    kr: float = 100.0
+    """Rotation gain (1/s^2, on the local rotation vector), times ``inertia``: local torque."""
+    dr: float = 20.0
+    """Angular velocity gain (1/s), times ``inertia``."""
+    inertia: float = 0.02
+    """Radius of gyration squared (m^2) times the total mass gives the inertia the torque scales with. The wrench
+    is held over the control step's substeps and the torque acts on the pelvis alone: on sub2 0.05 already
+    destabilises the replay (body error in 17-24 steps), 0.02 does not."""
+    initial_gain: float = 1.0
+    """Gain at frame 0 of training."""
+    zero_by_frames: int = 300_000
+    """Training frames at which the gain reaches 0 (linear)."""
+    min_gain: float = 0.05
+    """Below this the gain is 0."""
+
+
+@dataclass(frozen=True)
 class StartSamplingConfig:
     """Where training episodes start (besides the ``reset_frame0_prob`` share at frame 0)."""
 
@@ -244,6 +273,8 @@ class EnvConfig:
     """Start frames of training episodes that do not start at frame 0."""
     object_controller: ObjectControllerConfig = field(default_factory=ObjectControllerConfig)
     """Training-only object curriculum (virtual object controller)."""
+    root_assist: RootAssistConfig = field(default_factory=RootAssistConfig)
+    """Training-only root assist (off)."""
     feedforward: FeedforwardConfig = field(default_factory=FeedforwardConfig)
     """Open-loop PD-target offsets optimised before training (residual actions only)."""
     action_mode: str = "residual"
@@ -307,6 +338,9 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError("starts: bin_frames and kernel >= 1, alpha in (0, 1], uniform in [0, 1]")
     if not 0 <= st.bank <= 1 or st.bank_size < 1:
         raise ValueError("starts: bank in [0, 1], bank_size >= 1")
+    ra = cfg.root_assist
+    if ra.enabled and (ra.zero_by_frames < 1 or not ra.initial_gain >= 0 or not ra.inertia > 0):
+        raise ValueError("root_assist: zero_by_frames >= 1, initial_gain >= 0, inertia > 0")
 
 
 def variant_config(name: str, **overrides: object) -> EnvConfig:

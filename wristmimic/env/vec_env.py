@@ -211,6 +211,12 @@ class WristMimicEnv:
         self._obj_mass = f32(m.body_mass[bids])[:, None] if bids else torch.zeros(0, 1, device=dev)
         self._obj_inertia = f32(m.body_inertia[bids].mean(-1))[:, None] if bids else torch.zeros(0, 1, device=dev)
         self._gravity = f32(-m.opt.gravity)
+        # root assist (training only): motors on the humanoid root's free joint, if the scene has them
+        rac = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"rac_{k}") for k in range(6)]
+        self.has_root_assist = min(rac) >= 0
+        self._rac_cols = idx(rac if self.has_root_assist else [])
+        root_body = int(m.jnt_bodyid[m.actuator_trnid[rac[0], 0]]) if self.has_root_assist else 0
+        self._root_mass = float(m.body_subtreemass[root_body])  # the whole humanoid
         self.feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
         """(T, D) open-loop offsets added to the residual hinges' targets (:mod:`wristmimic.env.feedforward`);
         zero unless a run's optimised offsets are loaded."""
@@ -230,6 +236,9 @@ class WristMimicEnv:
         self.object_weight_gain: float | None = None
         """Gain of the controller's weight support (``ObjectControllerConfig.weight_zero_by_frames``); None: the
         same as :attr:`object_gain`."""
+        self.root_gain = 0.0
+        """Gain of the root assist (0: off; ``EnvConfig.root_assist``). Set by training; needs a scene built with
+        ``SceneConfig(root_actuators=True)``."""
         self.on_step: Callable[[SimState, torch.Tensor], None] | None = None
         """Called in :meth:`step` with the state just reached (before any auto-reset) and the actions (a recorder:
         ``wristmimic.evaluate.export``); ``steps`` is then the frame reached, ``_ctrl`` the PD targets applied."""
@@ -530,6 +539,8 @@ class WristMimicEnv:
         self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(self.device, torch.float32))
         if self.object_gain > 0.0 or (self.object_weight_gain or 0.0) > 0.0:
             self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench().flatten(1)
+        if self.root_gain > 0.0:
+            self._ctrl[:, self._rac_cols] = self.root_wrench()
         self.backend.step(self._ctrl, self.scene.config.substeps)
         self.frame += 1
         self.steps += 1
@@ -588,6 +599,21 @@ class WristMimicEnv:
             return self.object_gain * torch.cat([self._obj_mass * (pd + self._gravity), self._obj_inertia * alpha], -1)
         acc = self.object_gain * pd + self.object_weight_gain * self._gravity
         return torch.cat([self._obj_mass * acc, self.object_gain * self._obj_inertia * alpha], -1)
+
+    def root_wrench(self) -> torch.Tensor:
+        """(N, 6) root assist: world force and local torque pulling the humanoid's root toward the reference root
+        pose and velocity of the frame being stepped to, times :attr:`root_gain` (no gravity support)."""
+        if not self.has_root_assist:
+            raise RuntimeError("root_gain > 0 needs a scene built with SceneConfig(root_actuators=True)")
+        c = self.cfg.root_assist
+        f = (self.frame + 1).clamp(0, self.ref.num_frames - 1)
+        rq, rv = self._ref_qpos[f].to(torch.float32), self._ref_qvel[f].to(torch.float32)
+        qpos, qvel = self.backend.qpos[:, :7].to(torch.float32), self.backend.qvel[:, :6].to(torch.float32)
+        acc = c.kp * (rq[:, :3] - qpos[:, :3]) + c.kd * (rv[:, :3] - qvel[:, :3])
+        rot = quat_to_rotvec(quat_mul(quat_conj(qpos[:, 3:7]), rq[:, 3:7]))  # local frame
+        alpha = c.kr * rot + c.dr * (rv[:, 3:6] - qvel[:, 3:6])
+        m = self.root_gain * self._root_mass
+        return torch.cat([m * acc, (m * c.inertia) * alpha], -1)
 
     def _sim_hand(self, s: SimState) -> torch.Tensor:
         """(N, 2) bool: any body of the left / right hand touches a dynamic object."""

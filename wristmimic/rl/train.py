@@ -113,7 +113,9 @@ def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_f
     env_cfg = env_config_from_dict(config["env"])
     scene_cfg = scene_config_from_dict(config["scene_config"])
     # the training scene alone carries the virtual object controller's motors (config.json records the user's)
-    scene_cfg = replace(scene_cfg, object_actuators=env_cfg.object_controller.enabled)
+    scene_cfg = replace(
+        scene_cfg, object_actuators=env_cfg.object_controller.enabled, root_actuators=env_cfg.root_assist.enabled
+    )
     physics = config.get("physics") or {"backend": "cpu"}  # runs from before backends existed: CPU
     options = {"device": physics["device"]} if physics["backend"] == "warp" and physics.get("device") else None
     env = WristMimicEnv.from_file(
