@@ -176,6 +176,7 @@ def test_export_stage_after_ray_jobs_writes_files_that_validate(tmp_path: Path, 
     assert code == 0 and "0 ran, 7 up to date" in out and "dispatched" not in out, out
 
 
+@pytest.mark.slow  # ~20-40 s on 2 cores; CI runs it with -m slow
 def test_a_failing_job_is_reported_and_the_others_kept(tmp_path: Path, tiny_h5: Path) -> None:
     spec = _spec(tmp_path, tiny_h5, scenes='["sub1_box_000", "no_such_scene"]')
     code, out = _run(str(spec), *LOCAL)
@@ -259,6 +260,7 @@ def test_a_node_running_other_code_refuses_the_job(tmp_path: Path, tiny_h5: Path
     assert f"runs wristmimic {code_fingerprint()}" in res.error and "install the same code on every node" in res.error
 
 
+@pytest.mark.slow  # ~20-40 s on 2 cores; CI runs it with -m slow
 def test_ctrl_c_stops_jobs_keeping_their_checkpoints_and_a_rerun_resumes(tmp_path: Path, tiny_h5: Path) -> None:
     """Ctrl-C on the driver (SIGINT just after dispatch): the job stops after a training iteration, the driver
     brings back its checkpoint and exits with KeyboardInterrupt; running again resumes it to the end."""

@@ -257,6 +257,7 @@ def test_min_jerk_is_smooth_at_both_ends() -> None:
     assert abs(v[0]) < 1e-3 and abs(v[-1]) < 1e-3 and v.max() == pytest.approx(1.875, abs=1e-3)
 
 
+@pytest.mark.slow  # ~20-40 s on 2 cores; CI runs it with -m slow
 def test_a_tall_humanoid_gets_the_same_task(tmp_path: Path) -> None:
     """The scene scales with stature (table height, standing distance, lift), so a 1.90 m humanoid reaches,
     holds and puts down the box as cleanly as the 1.70 m default."""
