@@ -82,6 +82,39 @@ def test_hand_contacts_have_torsional_friction_and_old_runs_keep_theirs(synth_fi
         assert (model.geom_condim[body] == 3).all()  # only the hands get torsional friction
 
 
+def test_support_friction_governs_object_floor_contacts_but_not_the_hands(synth_files: tuple[Path, Path]) -> None:
+    """support_friction: object-floor contacts take it, hand-object contacts keep the hands' friction (priority)."""
+    from wristmimic.errors import InputError
+
+    def contact_friction(sc, hand: bool) -> float:
+        m, d = sc.model, mujoco.MjData(sc.model)
+        o = sc.objects[0]
+        mujoco.mj_forward(m, d)
+        wrist = sc.body_ids[sc.skeleton.body_names.index("L_Wrist")]
+        adr = m.jnt_qposadr[m.body_jntadr[o.body_id]]
+        d.qpos[adr : adr + 3] = d.xpos[wrist] if hand else [5.0, 5.0, 0.0]  # on the wrist / half into the floor
+        mujoco.mj_forward(m, d)
+        want = wrist if hand else 0
+        mus = [
+            d.contact[i].friction[0]
+            for i in range(d.ncon)
+            if {m.geom_bodyid[d.contact[i].geom1], m.geom_bodyid[d.contact[i].geom2]} == {o.body_id, want}
+        ]
+        assert mus, "no contact made"
+        return float(mus[0])
+
+    with open_dataset(synth_files[0]) as ds:
+        base = build_scene(ds, "sub1_box_000")
+        low = build_scene(ds, "sub1_box_000", SceneConfig(support_friction=0.3))
+        for bad in (-0.1, float("nan")):
+            with pytest.raises(InputError, match="support_friction"):
+                build_scene(ds, "sub1_box_000", SceneConfig(support_friction=bad))
+    assert contact_friction(base, hand=False) == pytest.approx(1.0)  # MuJoCo's max(floor 1.0, object)
+    assert contact_friction(low, hand=False) == pytest.approx(0.3)
+    assert contact_friction(low, hand=True) == pytest.approx(contact_friction(base, hand=True)) == pytest.approx(1.0)
+    assert (base.model.geom_priority == 0).all()
+
+
 def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: tuple[Path, Path]) -> None:
     from wristmimic.errors import InputError
 

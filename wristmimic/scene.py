@@ -91,6 +91,13 @@ class SceneConfig:
     """Linear/angular damping of dynamic objects (free-joint dof damping)."""
     object_friction: float | None = None
     """Sliding friction of object geoms; None: the URDF's lateral friction, else MuJoCo's default 1."""
+    support_friction: float | None = None
+    """Sliding friction of a dynamic object's contacts with everything but the hands: the floor, static objects,
+    non-hand body parts. None: MuJoCo's rule, the larger of the two geoms' (the floor's 1.0 for OMOMO objects).
+    When set, dynamic-object hulls take MuJoCo geom priority 1 with this friction and hand geoms priority 2, so
+    hand-object contacts keep the hands' friction. OMOMO's sub2 drags its large table with the far legs on the
+    floor (5-9 mm above it in the reference): at 1.0 the legs hold ~150 N of the 200 N table and resist the carry
+    with 40-60 N. Isaac Gym averages the two (InterMimic: object 0.6, ground 0.9 -> 0.75)."""
     object_density: float | None = None
     """Density (kg/m^3) of the dynamic objects: mass and inertia are scaled from the canonical file's (which
     records the density it used, 1000 for OMOMO and ParaHome conversions); None keeps them. InterMimic trained
@@ -214,6 +221,11 @@ def finger_ranges(skel: Skeleton, roles: dict[str, np.ndarray]) -> dict[int, np.
     return out
 
 
+SUPPORT_PRIORITY = 1
+"""MuJoCo geom priority of dynamic-object hulls under ``support_friction`` (hands one above): the higher-priority
+geom's friction governs a contact; equal priorities take the larger of the two."""
+
+
 LEGACY_SCENE_DEFAULTS: dict = {
     "hand_condim": 3,
     "hand_torsional_friction": 0.005,
@@ -276,6 +288,8 @@ def _humanoid(
             if body.name in hands and cfg.hand_condim != 3:
                 g.condim = cfg.hand_condim
                 g.friction = [float(g.friction[0]), cfg.hand_torsional_friction, float(g.friction[2])]
+            if body.name in hands and cfg.support_friction is not None:
+                g.priority = SUPPORT_PRIORITY + 1
     return np.asarray(gains, dtype=np.float64)
 
 
@@ -284,6 +298,9 @@ def _add_object(
 ) -> None:
     body = spec.worldbody.add_body(name=f"obj_{oid}", pos=pos, quat=quat)
     friction = cfg.object_friction if cfg.object_friction is not None else rec.urdf.get("lateral_friction")
+    supported = dynamic and cfg.support_friction is not None
+    if supported:
+        friction = cfg.support_friction
     if dynamic:
         fj = body.add_freejoint(name=f"obj_{oid}")
         fj.damping = [cfg.object_damping, 0.0, 0.0]
@@ -312,6 +329,8 @@ def _add_object(
         )
         if friction is not None:
             g.friction = [float(friction), 0.005, 0.0001]
+        if supported:
+            g.priority = SUPPORT_PRIORITY
         if cfg.contact_condim is not None:
             g.condim = cfg.contact_condim
     if cfg.visual_meshes and not rec.inferred:
@@ -349,6 +368,10 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
             raise InputError(
                 None, f"scene_config.{name}", f"invalid value {v!r}", "None or a finite number > 0 (kg/m^3)"
             )
+    for name in ("object_friction", "support_friction"):
+        v = getattr(cfg, name)
+        if v is not None and not (np.isfinite(v) and v >= 0):
+            raise InputError(None, f"scene_config.{name}", f"invalid value {v!r}", "None or a finite number >= 0")
     spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{cfg.solver.upper()}")
     spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{cfg.cone.upper()}")
     spec.option.iterations, spec.option.ls_iterations = int(cfg.iterations), int(cfg.ls_iterations)
