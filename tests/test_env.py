@@ -225,3 +225,97 @@ def test_sub2_reference_floats_above_the_floor_and_grounding_measures_it(omomo_h
     cfg = replace(EnvConfig(), ground_reference=True)
     env = WristMimicEnv.from_file(omomo_h5, "sub2_largetable_000", num_worlds=1, config=cfg, nthread=1)
     assert 0.005 < env.ref.grounded_by < 0.03
+
+
+def _foot_heights(scene, root_pos, root_quat, angles):
+    """(T, sides) lowest height of each side's foot geoms above the floor."""
+    import mujoco
+    import numpy as np
+
+    from wristmimic.env.grounding import _foot_chains
+
+    m = scene.model
+    d = mujoco.MjData(m)
+    floor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+    chains = _foot_chains(scene)
+    qadr, ft = scene.hinge_qposadr.reshape(-1), np.zeros(6)
+    out = np.empty((len(angles), len(chains)))
+    for t in range(len(angles)):
+        d.qpos[:] = m.qpos0
+        d.qpos[0:3], d.qpos[3:7], d.qpos[qadr] = root_pos[t], root_quat[t], angles[t]
+        mujoco.mj_kinematics(m, d)
+        for k, (geoms, _, _) in enumerate(chains):
+            out[t, k] = min(mujoco.mj_geomDistance(m, d, g, floor, 1.0, ft) for g in geoms)
+    return out
+
+
+def test_lift_feet_clears_swinging_feet_and_unsinks_standing_ones(files) -> None:
+    """A reference sunk 1 cm into the floor that stands for 12 frames, then glides at 0.6 m/s: lift_feet bends
+    only the legs so that standing feet are on (not in) the floor and gliding ones 2 cm above it."""
+    import numpy as np
+
+    from wristmimic.env.grounding import _foot_chains, floor_clearance, lift_feet
+
+    path, sid = files["smplx"]
+    env = WristMimicEnv.from_file(path, sid, num_worlds=1, nthread=1)
+    r, sc = env.ref, env.scene
+    T = 30
+    rq = np.repeat(r.root_quat[:1].double().numpy(), T, 0)
+    ang = np.repeat(r.joint_angles[:1].double().numpy(), T, 0)
+    legs = np.unique(np.concatenate([q for _, q, _ in _foot_chains(sc)]))
+    cols = np.isin(sc.hinge_qposadr.reshape(-1), legs)
+    ang[:, cols] = 0.0  # straight legs: both feet at one height
+    rp = np.repeat(r.root_pos[:1].double().numpy(), T, 0)
+    rp[:, 2] -= floor_clearance(sc, rp[:1], rq[:1], ang[:1]) + 0.01  # feet 1 cm into the floor
+    rp[12:, 0] += 0.02 * np.arange(1, T - 11)  # 2 cm per frame at 30 fps from frame 12 on
+    before = _foot_heights(sc, rp, rq, ang)
+    assert len(_foot_chains(sc)) == 2 and before.max() < -0.009
+    out, changed = lift_feet(sc, rp, rq, ang, 0.02, 30.0)
+    after = _foot_heights(sc, rp, rq, out)
+    assert changed == 2 * T
+    assert (after[:8] > -1e-3).all() and (after[:8] < 0.005).all()  # standing: on the floor
+    assert (after[16:] > 0.02 - 1e-3).all()  # swinging (the 7-frame ramp done): 2 cm clear
+    assert np.array_equal(out[:, ~cols], ang[:, ~cols]) and not np.array_equal(out[:, cols], ang[:, cols])
+
+
+def test_foot_clearance_reference_stays_consistent_and_must_match_the_config(files) -> None:
+    from dataclasses import replace
+
+    import mujoco
+    import numpy as np
+
+    path, sid = files["smplx"]
+    cfg = replace(EnvConfig(), ground_reference=True, foot_clearance=0.02)
+    env = WristMimicEnv.from_file(path, sid, num_worlds=1, config=cfg, nthread=1)
+    assert env.ref.foot_clearance == 0.02
+    m, d = env.scene.model, mujoco.MjData(env.scene.model)
+    qadr = env.scene.hinge_qposadr.reshape(-1)
+    for t in range(0, env.ref.num_frames, 7):  # bodies = forward kinematics of the (bent) joint angles
+        d.qpos[0:3], d.qpos[3:7] = env.ref.root_pos[t].numpy(), env.ref.root_quat[t].numpy()
+        d.qpos[qadr] = env.ref.joint_angles[t].numpy()
+        mujoco.mj_kinematics(m, d)
+        np.testing.assert_allclose(d.xpos[env.scene.body_ids], env.ref.body_pos[t].numpy(), atol=2e-3)
+    plain = WristMimicEnv.from_file(path, sid, num_worlds=1, config=replace(cfg, foot_clearance=0.0), nthread=1)
+    with pytest.raises(ValueError, match="foot_clearance"):
+        WristMimicEnv(plain.scene, plain.ref, 1, cfg, nthread=1)
+    with pytest.raises(ValueError, match="foot_clearance"):
+        WristMimicEnv(plain.scene, plain.ref, 1, replace(cfg, foot_clearance=0.5), nthread=1)
+
+
+def test_sub2_swing_toe_clears_the_floor_with_foot_clearance(omomo_h5: Path) -> None:
+    """sub2's first backward step (frames 45-54) drags the right toe 0-7 mm above the floor; 2 cm with the lever."""
+    from dataclasses import replace
+
+    cfg = replace(EnvConfig(), ground_reference=True)
+    ref = {}
+    for c in (0.0, 0.02):
+        env = WristMimicEnv.from_file(
+            omomo_h5, "sub2_largetable_000", num_worlds=1, config=replace(cfg, foot_clearance=c), nthread=1
+        )
+        r = env.ref
+        ref[c] = _foot_heights(
+            env.scene, r.root_pos.double().numpy(), r.root_quat.double().numpy(), r.joint_angles.double().numpy()
+        )
+    right = 1  # chains are (left, right)
+    assert ref[0.0][45:55, right].min() < 0.008
+    assert ref[0.02][47:53, right].min() > 0.019 and ref[0.02][:, right].min() > -1e-3

@@ -290,6 +290,11 @@ class EnvConfig:
     ground_reference: bool = False
     """Lower the humanoid's reference (root and bodies, not the objects) by its floor clearance, so its feet
     stand on the simulated floor (:mod:`wristmimic.env.grounding`; sub2_largetable_000: 2.0 cm)."""
+    foot_clearance: float = 0.0
+    """m; > 0 bends each leg of the reference (after ``ground_reference``) so that a swinging foot's lowest point
+    clears the floor by this much and a standing foot's does not sink into it (:func:`wristmimic.env.grounding.
+    lift_feet`). sub2_largetable_000 shuffles back with its swing toe 0-7 mm above the floor, and a standing toe
+    up to 1.5 cm inside it: simulated, the toe drags (76-114 N of friction over 16 frames of the first step)."""
     residual_scale: float = 0.5
     """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
@@ -333,6 +338,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"unknown action_mode {cfg.action_mode!r}; expected one of {', '.join(ACTION_MODES)}")
     if not cfg.residual_scale > 0 or not cfg.action_scale > 0:
         raise ValueError("residual_scale and action_scale must be > 0")
+    if not 0.0 <= cfg.foot_clearance <= 0.1:
+        raise ValueError(f"foot_clearance must be in [0, 0.1] m, got {cfg.foot_clearance}")
     st = cfg.starts
     if st.bin_frames < 1 or st.kernel < 1 or not 0 < st.alpha <= 1 or not 0 <= st.uniform <= 1:
         raise ValueError("starts: bin_frames and kernel >= 1, alpha in (0, 1], uniform in [0, 1]")

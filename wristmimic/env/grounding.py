@@ -39,3 +39,135 @@ def floor_clearance(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, j
         mujoco.mj_kinematics(m, d)
         lowest[t] = min(mujoco.mj_geomDistance(m, d, g, f, 1.0, fromto) for g in geoms for f in floors)
     return float(np.median(lowest))
+
+
+SWING_SPEED = 0.15
+"""m/s: a foot whose ankle moves faster than this over the ground (horizontally) is swinging."""
+
+
+def _foot_chains(scene: Scene) -> list[tuple[list[int], np.ndarray, np.ndarray]]:
+    """Per side: (the foot's colliding geoms, the leg's hinge qpos addresses, their dof addresses); the leg is every
+    joint from the hip down to the toe. Empty where the roles name no feet."""
+    m, skel = scene.model, scene.skeleton
+    feet = [int(b) for b in scene.humanoid.roles.get("feet", [])]
+    out = []
+    for prefix in ("L_", "R_"):
+        side = [b for b in feet if skel.body_names[b].startswith(prefix)]
+        if not side:
+            continue
+        chain = set(side)
+        b = min(side, key=lambda x: sum(1 for _ in _ancestors(skel.parents, x)))  # the foot body nearest the root
+        chain.update(a for a in _ancestors(skel.parents, b) if skel.parents[a] >= 0)  # up to (not incl.) the root
+        joints = [j for j, jb in enumerate(skel.joint_bodies) if int(jb) in chain]
+        geoms = [
+            g
+            for bb in side
+            for g in range(
+                m.body_geomadr[scene.body_ids[bb]],
+                m.body_geomadr[scene.body_ids[bb]] + m.body_geomnum[scene.body_ids[bb]],
+            )  # noqa: E501
+            if m.geom_contype[g] or m.geom_conaffinity[g]
+        ]
+        out.append((geoms, scene.hinge_qposadr[joints].reshape(-1), scene.hinge_dofadr[joints].reshape(-1)))
+    return out
+
+
+def _ancestors(parents: np.ndarray, b: int):
+    while b >= 0:
+        b = int(parents[b])
+        if b >= 0:
+            yield b
+
+
+def lift_feet(
+    scene: Scene,
+    root_pos: np.ndarray,
+    root_quat: np.ndarray,
+    joint_angles: np.ndarray,
+    clearance: float,
+    fps: float,
+    iterations: int = 20,
+) -> tuple[np.ndarray, int]:
+    """Hinge angles (T, J*3) whose feet clear the floor: a swinging foot (ankle faster than :data:`SWING_SPEED`
+    over the ground) keeps its lowest point ``clearance`` above it, a standing foot at least on it, by damped
+    least squares on that leg's hinges (hip to toe) moving the lowest point straight up. The target height is the
+    swing indicator smoothed over 7 frames times ``clearance``, so it rises and falls with the step. Returns the
+    angles and how many foot-frames changed."""
+    m = scene.model
+    floors = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    chains = _foot_chains(scene)
+    out = np.array(joint_angles, dtype=np.float64, copy=True)
+    if not floors or not chains or clearance < 0:
+        return out, 0
+    d = mujoco.MjData(m)
+    qadr = scene.hinge_qposadr.reshape(-1)
+    col = {int(a): k for k, a in enumerate(qadr)}
+    T = len(out)
+
+    def pose(t: int) -> None:
+        d.qpos[:] = m.qpos0
+        d.qpos[0:3], d.qpos[3:7] = root_pos[t], root_quat[t]
+        d.qpos[qadr] = out[t]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+
+    def lowest(geoms: list[int]) -> tuple[float, np.ndarray, int]:
+        best, point, body, ft = np.inf, np.zeros(3), 0, np.zeros(6)
+        for g in geoms:
+            for f in floors:
+                dist = mujoco.mj_geomDistance(m, d, g, f, 1.0, ft)
+                if dist < best:
+                    best, point, body = dist, ft[:3].copy(), int(m.geom_bodyid[g])
+        return best, point, body
+
+    # swing indicator per side from the ankle-ish foot geoms' horizontal speed
+    heights = []
+    for geoms, _, _ in chains:
+        xy = np.empty((T, 2))
+        for t in range(T):
+            pose(t)
+            xy[t] = d.xpos[m.geom_bodyid[geoms[0]], :2]
+        speed = np.zeros(T)
+        if T > 1:
+            speed[:-1] = np.linalg.norm(np.diff(xy, axis=0), axis=-1) * fps
+            speed[-1] = speed[-2]
+        swing = (speed > SWING_SPEED).astype(np.float64)
+        heights.append(clearance * np.convolve(np.pad(swing, 3, mode="edge"), np.ones(7) / 7, mode="valid"))
+    lo, hi = scene.skeleton.joint_range.reshape(-1, 2).T
+    jacp = np.zeros((3, m.nv))
+    changed = 0
+    for t in range(T):
+        for (geoms, qa, da), h in zip(chains, heights, strict=True):
+            pose(t)
+            dist, point, body = lowest(geoms)
+            if dist >= h[t] - 1e-4:
+                continue
+            changed += 1
+            cols = [col[int(a)] for a in qa]
+            for _ in range(iterations):
+                mujoco.mj_jac(m, d, jacp, None, point, body)
+                J = jacp[:, da]
+                err = np.array([0.0, 0.0, h[t] - dist])
+                dq = J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(3), err)
+                out[t, cols] = np.clip(out[t, cols] + dq, lo[cols], hi[cols])
+                pose(t)
+                dist, point, body = lowest(geoms)
+                if dist >= h[t] - 1e-4:
+                    break
+    return out, changed
+
+
+def forward_bodies(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, joint_angles: np.ndarray):
+    """MuJoCo forward kinematics of the humanoid: body positions (T, B, 3) and wxyz quaternions (T, B, 4)."""
+    m = scene.model
+    d = mujoco.MjData(m)
+    qadr = scene.hinge_qposadr.reshape(-1)
+    T, ids = len(joint_angles), scene.body_ids
+    pos, quat = np.empty((T, len(ids), 3)), np.empty((T, len(ids), 4))
+    for t in range(T):
+        d.qpos[:] = m.qpos0
+        d.qpos[0:3], d.qpos[3:7] = root_pos[t], root_quat[t]
+        d.qpos[qadr] = joint_angles[t]
+        mujoco.mj_kinematics(m, d)
+        pos[t], quat[t] = d.xpos[ids], d.xquat[ids]
+    return pos, quat

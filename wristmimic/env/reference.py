@@ -67,6 +67,10 @@ class Reference:
     grasp_hands: torch.Tensor  # (2,) bool
     grounded_by: float | None = None
     """Metres the humanoid was lowered by (``load_reference(ground=True)``); None: as recorded."""
+    foot_clearance: float = 0.0
+    """Swing-foot clearance the legs were bent to (``load_reference(foot_clearance=...)``); 0: as recorded."""
+    feet_lifted: int = 0
+    """Foot-frames :func:`~wristmimic.env.grounding.lift_feet` changed."""
 
     def to(self, device: str | torch.device) -> Reference:
         return Reference(**{k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in self.__dict__.items()})
@@ -79,10 +83,13 @@ def load_reference(
     seed: int = 0,
     max_frames: int | None = None,
     ground: bool = False,
+    foot_clearance: float = 0.0,
 ) -> Reference:
     """Read the sequence of ``scene`` from ``ds`` and derive velocities, surface points and distances.
     ``max_frames`` keeps only the first frames (a short task, e.g. for tests); ``ground`` lowers the humanoid
-    (root and bodies, not the objects) by its floor clearance (:mod:`wristmimic.env.grounding`)."""
+    (root and bodies, not the objects) by its floor clearance; ``foot_clearance`` > 0 (m) then bends each leg so
+    that a swinging foot clears the floor by that much and a standing one does not sink into it
+    (:func:`wristmimic.env.grounding.lift_feet`)."""
     seq = ds.sequence(scene.sequence_id)
     s = seq.load(None if max_frames is None else slice(0, max(int(max_frames), 2)))
     dz = 0.0
@@ -94,6 +101,21 @@ def load_reference(
         s.root_pos = s.root_pos - np.array([0.0, 0.0, dz], dtype=s.root_pos.dtype)
         s.body_pos = s.body_pos - np.array([0.0, 0.0, dz], dtype=s.body_pos.dtype)
     fps = float(ds.attrs.get("fps", 30.0))
+    lifted = 0
+    if foot_clearance > 0:
+        from wristmimic.env.grounding import forward_bodies, lift_feet
+
+        rp, rq = s.root_pos.astype(np.float64), s.root_quat.astype(np.float64)
+        old = s.joint_angles.reshape(s.num_frames, -1).astype(np.float64)
+        new, lifted = lift_feet(scene, rp, rq, old, foot_clearance, fps)
+        if lifted:
+            p0, q0 = forward_bodies(scene, rp, rq, old)
+            p1, q1 = forward_bodies(scene, rp, rq, new)
+            s.body_pos = (s.body_pos + (p1 - p0)).astype(s.body_pos.dtype)
+            s.body_quat = quat_mul(quat_mul(q1, quat_conj(q0)), s.body_quat.astype(np.float64)).astype(
+                s.body_quat.dtype
+            )
+            s.joint_angles = new.reshape(s.joint_angles.shape).astype(s.joint_angles.dtype)
     dyn_idx = [k for k, o in enumerate(scene.objects) if o.dynamic]
     obj_pos = s.object_pos[:, dyn_idx].astype(np.float64)
     obj_quat = s.object_quat[:, dyn_idx].astype(np.float64)
@@ -157,4 +179,6 @@ def load_reference(
         t_c=t_c,
         grasp_hands=torch.as_tensor(grasp),
         grounded_by=dz if ground else None,
+        foot_clearance=float(foot_clearance) if foot_clearance > 0 else 0.0,
+        feet_lifted=int(lifted),
     )

@@ -120,6 +120,11 @@ class WristMimicEnv:
         check_env_config(self.cfg)
         if self.cfg.ground_reference and reference.grounded_by is None:
             raise ValueError("ground_reference needs a reference loaded with load_reference(ground=True)")
+        if self.cfg.foot_clearance != reference.foot_clearance:
+            raise ValueError(
+                f"foot_clearance {self.cfg.foot_clearance} needs a reference loaded with that foot_clearance"
+                f" (this one: {reference.foot_clearance})"
+            )
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
         if isinstance(backend, str):
@@ -331,7 +336,7 @@ class WristMimicEnv:
         with open_dataset(dataset) as ds:
             scene = build_scene(ds, sequence_id, scene_config)
             ref = load_reference(
-                ds, scene, cfg.ig_points, 0, max_frames, ground=cfg.ground_reference
+                ds, scene, cfg.ig_points, 0, max_frames, ground=cfg.ground_reference, foot_clearance=cfg.foot_clearance
             )  # point subset: seed 0
         return cls(scene, ref, num_worlds, cfg, seed, backend, nthread, backend_options)
 
