@@ -65,7 +65,7 @@ def _foot_chains(scene: Scene) -> list[tuple[list[int], np.ndarray, np.ndarray]]
             for g in range(
                 m.body_geomadr[scene.body_ids[bb]],
                 m.body_geomadr[scene.body_ids[bb]] + m.body_geomnum[scene.body_ids[bb]],
-            )  # noqa: E501
+            )
             if m.geom_contype[g] or m.geom_conaffinity[g]
         ]
         out.append((geoms, scene.hinge_qposadr[joints].reshape(-1), scene.hinge_dofadr[joints].reshape(-1)))
