@@ -244,7 +244,7 @@ def _foot_heights(scene, root_pos, root_quat, angles):
         d.qpos[:] = m.qpos0
         d.qpos[0:3], d.qpos[3:7], d.qpos[qadr] = root_pos[t], root_quat[t], angles[t]
         mujoco.mj_kinematics(m, d)
-        for k, (geoms, _, _) in enumerate(chains):
+        for k, (geoms, _, _, _) in enumerate(chains):
             out[t, k] = min(mujoco.mj_geomDistance(m, d, g, floor, 1.0, ft) for g in geoms)
     return out
 
@@ -262,7 +262,7 @@ def test_lift_feet_clears_swinging_feet_and_unsinks_standing_ones(files) -> None
     T = 30
     rq = np.repeat(r.root_quat[:1].double().numpy(), T, 0)
     ang = np.repeat(r.joint_angles[:1].double().numpy(), T, 0)
-    legs = np.unique(np.concatenate([q for _, q, _ in _foot_chains(sc)]))
+    legs = np.unique(np.concatenate([q for _, q, _, _ in _foot_chains(sc)]))
     cols = np.isin(sc.hinge_qposadr.reshape(-1), legs)
     ang[:, cols] = 0.0  # straight legs: both feet at one height
     rp = np.repeat(r.root_pos[:1].double().numpy(), T, 0)

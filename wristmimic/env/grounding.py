@@ -19,6 +19,15 @@ import numpy as np
 from wristmimic.scene import Scene
 
 
+def _pose(scene: Scene, d: mujoco.MjData, root_pos: np.ndarray, root_quat: np.ndarray, angles: np.ndarray) -> None:
+    """Pose the humanoid of ``d`` (root position, wxyz quaternion, hinge angles in actuator order); kinematics only."""
+    m = scene.model
+    d.qpos[:] = m.qpos0
+    d.qpos[0:3], d.qpos[3:7] = root_pos, root_quat
+    d.qpos[scene.hinge_qposadr.reshape(-1)] = angles
+    mujoco.mj_kinematics(m, d)
+
+
 def floor_clearance(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, joint_angles: np.ndarray) -> float:
     """Median over frames of the humanoid's lowest geom height above the floor (m; negative: below it); 0.0 when
     the scene has no floor. Root pose (T, 3) / (T, 4) wxyz, hinge angles (T, J*3) in actuator order."""
@@ -29,14 +38,10 @@ def floor_clearance(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, j
     human = set(int(b) for b in scene.body_ids)
     geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] in human and (m.geom_contype[g] or m.geom_conaffinity[g])]
     d = mujoco.MjData(m)
-    qadr = scene.hinge_qposadr.reshape(-1)
     fromto = np.zeros(6)
     lowest = np.empty(len(joint_angles))
     for t in range(len(joint_angles)):
-        d.qpos[:] = m.qpos0
-        d.qpos[0:3], d.qpos[3:7] = root_pos[t], root_quat[t]
-        d.qpos[qadr] = joint_angles[t]
-        mujoco.mj_kinematics(m, d)
+        _pose(scene, d, root_pos[t], root_quat[t], joint_angles[t])
         lowest[t] = min(mujoco.mj_geomDistance(m, d, g, f, 1.0, fromto) for g in geoms for f in floors)
     return float(np.median(lowest))
 
@@ -45,9 +50,10 @@ SWING_SPEED = 0.15
 """m/s: a foot whose ankle moves faster than this over the ground (horizontally) is swinging."""
 
 
-def _foot_chains(scene: Scene) -> list[tuple[list[int], np.ndarray, np.ndarray]]:
-    """Per side: (the foot's colliding geoms, the leg's hinge qpos addresses, their dof addresses); the leg is every
-    joint from the hip down to the toe. Empty where the roles name no feet."""
+def _foot_chains(scene: Scene) -> list[tuple[list[int], np.ndarray, np.ndarray, int]]:
+    """Per side: (the foot's colliding geoms, the leg's hinge qpos addresses, their dof addresses, the foot body
+    nearest the root (the ankle), a skeleton index); the leg is every joint from the hip down to the toe. Empty
+    where the roles name no feet."""
     m, skel = scene.model, scene.skeleton
     feet = [int(b) for b in scene.humanoid.roles.get("feet", [])]
     out = []
@@ -68,7 +74,7 @@ def _foot_chains(scene: Scene) -> list[tuple[list[int], np.ndarray, np.ndarray]]
             )
             if m.geom_contype[g] or m.geom_conaffinity[g]
         ]
-        out.append((geoms, scene.hinge_qposadr[joints].reshape(-1), scene.hinge_dofadr[joints].reshape(-1)))
+        out.append((geoms, scene.hinge_qposadr[joints].reshape(-1), scene.hinge_dofadr[joints].reshape(-1), b))
     return out
 
 
@@ -100,16 +106,12 @@ def lift_feet(
     if not floors or not chains or clearance < 0:
         return out, 0
     d = mujoco.MjData(m)
-    qadr = scene.hinge_qposadr.reshape(-1)
-    col = {int(a): k for k, a in enumerate(qadr)}
+    col = {int(a): k for k, a in enumerate(scene.hinge_qposadr.reshape(-1))}
     T = len(out)
 
     def pose(t: int) -> None:
-        d.qpos[:] = m.qpos0
-        d.qpos[0:3], d.qpos[3:7] = root_pos[t], root_quat[t]
-        d.qpos[qadr] = out[t]
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
+        _pose(scene, d, root_pos[t], root_quat[t], out[t])
+        mujoco.mj_comPos(m, d)  # mj_jac needs it
 
     def lowest(geoms: list[int]) -> tuple[float, np.ndarray, int]:
         best, point, body, ft = np.inf, np.zeros(3), 0, np.zeros(6)
@@ -120,24 +122,19 @@ def lift_feet(
                     best, point, body = dist, ft[:3].copy(), int(m.geom_bodyid[g])
         return best, point, body
 
-    # swing indicator per side from the ankle-ish foot geoms' horizontal speed
-    heights = []
-    for geoms, _, _ in chains:
-        xy = np.empty((T, 2))
-        for t in range(T):
-            pose(t)
-            xy[t] = d.xpos[m.geom_bodyid[geoms[0]], :2]
-        speed = np.zeros(T)
-        if T > 1:
-            speed[:-1] = np.linalg.norm(np.diff(xy, axis=0), axis=-1) * fps
-            speed[-1] = speed[-2]
-        swing = (speed > SWING_SPEED).astype(np.float64)
-        heights.append(clearance * np.convolve(np.pad(swing, 3, mode="edge"), np.ones(7) / 7, mode="valid"))
+    # swing indicator per side from the ankle's horizontal speed
+    ankles = forward_bodies(scene, root_pos, root_quat, out)[0][:, [c[3] for c in chains], :2]  # (T, sides, 2)
+    speed = np.zeros(ankles.shape[:2])
+    if T > 1:
+        speed[:-1] = np.linalg.norm(np.diff(ankles, axis=0), axis=-1) * fps
+        speed[-1] = speed[-2]
+    swing = np.pad((speed > SWING_SPEED).astype(np.float64), ((3, 3), (0, 0)), mode="edge")
+    heights = [clearance * np.convolve(swing[:, k], np.ones(7) / 7, mode="valid") for k in range(len(chains))]
     lo, hi = scene.skeleton.joint_range.reshape(-1, 2).T
     jacp = np.zeros((3, m.nv))
     changed = 0
     for t in range(T):
-        for (geoms, qa, da), h in zip(chains, heights, strict=True):
+        for (geoms, qa, da, _), h in zip(chains, heights, strict=True):
             pose(t)
             dist, point, body = lowest(geoms)
             if dist >= h[t] - 1e-4:
@@ -161,13 +158,9 @@ def forward_bodies(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, jo
     """MuJoCo forward kinematics of the humanoid: body positions (T, B, 3) and wxyz quaternions (T, B, 4)."""
     m = scene.model
     d = mujoco.MjData(m)
-    qadr = scene.hinge_qposadr.reshape(-1)
     T, ids = len(joint_angles), scene.body_ids
     pos, quat = np.empty((T, len(ids), 3)), np.empty((T, len(ids), 4))
     for t in range(T):
-        d.qpos[:] = m.qpos0
-        d.qpos[0:3], d.qpos[3:7] = root_pos[t], root_quat[t]
-        d.qpos[qadr] = joint_angles[t]
-        mujoco.mj_kinematics(m, d)
+        _pose(scene, d, root_pos[t], root_quat[t], joint_angles[t])
         pos[t], quat[t] = d.xpos[ids], d.xquat[ids]
     return pos, quat
