@@ -120,13 +120,47 @@ def test_runs_recorded_before_action_modes_read_as_absolute() -> None:
     assert env_config_from_dict(to_jsonable(EnvConfig())) == EnvConfig()
 
 
-@pytest.mark.parametrize("mode, gravity", [("residual", False), ("residual", True), ("absolute", False)])
+def test_delta_fingers_hold_the_start_pose_and_move_by_the_scale_each_step(dataset: Path) -> None:
+    env = _env(dataset, finger_action="delta", finger_delta_scale=0.05)
+    plain = _env(dataset)
+    fingers = env.delta_hinges.numpy()
+    assert fingers.sum() == 3 * len(env.scene.humanoid.roles["fingers"]) and not (fingers & env.residual_hinges.numpy()).any()
+    lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
+    start = np.clip(env.ref.joint_angles[torch.tensor([0, 5, 11])].numpy(), lo, hi)
+    a = torch.zeros(3, env.action_size)
+    np.testing.assert_allclose(env.action_to_ctrl(a).numpy()[:, fingers], start[:, fingers], atol=1e-6)
+    # body hinges map exactly as without delta fingers
+    torch.testing.assert_close(env.action_to_ctrl(a)[:, ~fingers], plain.action_to_ctrl(a)[:, ~fingers])
+    # the observation carries held target - finger angle (zero right after a reference reset, up to clipping)
+    obs = env.observe()
+    part = env.obs_layout["finger_hold"]
+    assert obs.shape[1] == plain.observe().shape[1] + fingers.sum() and part.stop - part.start == fingers.sum()
+    q = env.ref.joint_angles[torch.tensor([0, 5, 11])].numpy()[:, fingers]
+    np.testing.assert_allclose(obs[:, part].numpy(), start[:, fingers] - q, atol=1e-6)
+    # two steps of +0.5 move the held target by 2 * 0.5 * scale (inside the range), state_dict carries it
+    half = torch.where(env.delta_hinges, 0.5, 0.0).expand(3, -1)  # body hinges on the reference: no resets
+    for _ in range(2):
+        assert not env.step(half)[2].any()
+    held = env.action_to_ctrl(a).numpy()[:, fingers]
+    want = np.clip(np.clip(start[:, fingers] + 0.025, lo[fingers], hi[fingers]) + 0.025, lo[fingers], hi[fingers])
+    np.testing.assert_allclose(held, want, atol=1e-5)
+    other = _env(dataset, finger_action="delta", finger_delta_scale=0.05)
+    other.load_state_dict(env.state_dict())
+    torch.testing.assert_close(other.action_to_ctrl(a), env.action_to_ctrl(a), rtol=0, atol=0)
+    with pytest.raises(ValueError, match="finger_action"):
+        _env(dataset, finger_action="synergy")
+
+
+@pytest.mark.parametrize(
+    "mode, gravity, fingers",
+    [("residual", False, "absolute"), ("residual", True, "absolute"), ("absolute", False, "absolute"), ("residual", False, "delta")],
+)
 def test_train_evaluate_and_view_map_actions_the_same_way(
-    dataset: Path, tmp_path: Path, mode: str, gravity: bool
+    dataset: Path, tmp_path: Path, mode: str, gravity: bool, fingers: str
 ) -> None:
     from wristmimic.evaluate.policy import load_eval_policy
 
-    env_cfg = variant_config("wristmimic", action_mode=mode, gravity_feedforward=gravity)
+    env_cfg = variant_config("wristmimic", action_mode=mode, gravity_feedforward=gravity, finger_action=fingers)
     ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
     spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32), env=env_cfg)
     start_run(spec, tmp_path / "run", progress=False)
@@ -136,8 +170,12 @@ def test_train_evaluate_and_view_map_actions_the_same_way(
     view_env = env_for_policy(policy, None, None)
     a = torch.linspace(-1, 1, 2 * train_env.action_size).reshape(2, -1)
     frames = torch.tensor([3, 17])
+    train_env.reset(start_frames=frames)
     want = train_env.action_to_ctrl(a, frames)
     for env in (eval_env, view_env):
+        env.reset(start_frames=frames[: env.num_worlds])
         assert env.cfg.action_mode == mode and env.cfg.gravity_feedforward == gravity
+        assert env.cfg.finger_action == fingers
         assert not env.has_object_controller  # the training-only object controller never reaches them
-        torch.testing.assert_close(env.action_to_ctrl(a, frames), want, rtol=0, atol=0)
+        n = env.num_worlds
+        torch.testing.assert_close(env.action_to_ctrl(a[:n], frames[:n]), want[:n], rtol=0, atol=0)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 ACTION_MODES = ("residual", "absolute")
+FINGER_ACTIONS = ("absolute", "delta")
 """How policy actions become PD targets (:attr:`EnvConfig.action_mode`)."""
 
 VARIANTS = ("wristmimic", "decoupled", "reward-modulation-only", "reset-only", "finger-guidance", "intermimic")
@@ -300,6 +301,14 @@ class EnvConfig:
     action_scale: float = 1.0
     """Absolute targets (every hinge in ``absolute`` mode, fingers in ``residual`` mode) are
     offset + action_scale * scale * a with InterMimic's mid-range offset and half-range scale."""
+    finger_action: str = "absolute"
+    """How finger actions become PD targets (neither uses a finger reference). ``absolute``: offset +
+    action_scale * scale * a, as above (a = 0 is the mid-range hand). ``delta``: each finger hinge keeps a held
+    target, moved by ``finger_delta_scale * a`` every control step and clipped to its range; a reset sets it to
+    the start state's angle, so a = 0 holds the current grip (DexMachina-style relative finger control). The
+    held target minus the finger angle is then part of the observation (``finger_hold``)."""
+    finger_delta_scale: float = 0.1
+    """rad per unit action per control step of a ``delta`` finger target (a full 1.6 rad closure in 16 steps)."""
 
 
 LEGACY_ENV_DEFAULTS: dict = {
@@ -338,6 +347,10 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"unknown action_mode {cfg.action_mode!r}; expected one of {', '.join(ACTION_MODES)}")
     if not cfg.residual_scale > 0 or not cfg.action_scale > 0:
         raise ValueError("residual_scale and action_scale must be > 0")
+    if cfg.finger_action not in FINGER_ACTIONS:
+        raise ValueError(f"unknown finger_action {cfg.finger_action!r}; expected one of {', '.join(FINGER_ACTIONS)}")
+    if not cfg.finger_delta_scale > 0:
+        raise ValueError(f"finger_delta_scale must be > 0, got {cfg.finger_delta_scale}")
     if not 0.0 <= cfg.foot_clearance <= 0.1:
         raise ValueError(f"foot_clearance must be in [0, 0.1] m, got {cfg.foot_clearance}")
     st = cfg.starts

@@ -188,6 +188,11 @@ class WristMimicEnv:
             np.repeat(~finger_joint, 3) & (self.cfg.action_mode == "residual"), device=dev
         )
         """(J*3,) bool: hinges whose PD target is reference + residual_scale * a (none in absolute mode)."""
+        self.delta_hinges = torch.as_tensor(np.repeat(finger_joint, 3) & (self.cfg.finger_action == "delta"), device=dev)
+        """(J*3,) bool: finger hinges with a held target moved by finger_delta_scale * a (``finger_action``)."""
+        self._delta_cols = self.delta_hinges.nonzero().flatten()
+        self._held = torch.zeros(N, len(self.delta_hinges), device=dev)
+        """(N, J*3) held PD targets of the ``delta`` finger hinges (other columns unused)."""
         self._ff_time = f32(scene.gains[:, 1] / scene.gains[:, 0] * float(self.cfg.velocity_feedforward))
         self._ctrl = torch.zeros(N, scene.model.nu, device=dev)
         self._act_cols = idx(scene.actuator_ids.reshape(-1))
@@ -401,6 +406,9 @@ class WristMimicEnv:
             self.start_counts += torch.stack([(mask & (f > 0)).sum(), (mask & use).sum()])
         self._lineage = torch.where(mask, lineage, self._lineage)
         self.backend.reset(mask, qpos, qvel)
+        if self._delta_cols.numel():  # a reset holds the start state's finger angles
+            start = qpos[:, self._hinge_qpos].to(torch.float32)
+            self._held = torch.where(mask[:, None], torch.maximum(torch.minimum(start, self._hi), self._lo), self._held)
         r, col = self.ref, mask[:, None]
         self.frame = torch.where(mask, f, self.frame)
         self.start = torch.where(mask, f, self.start)
@@ -508,6 +516,9 @@ class WristMimicEnv:
             self.goal_contact,
             None,  # the state's contact markers: every body
         )
+        if self._delta_cols.numel():
+            q = self.backend.qpos.index_select(1, self._hinge_qpos.index_select(0, self._delta_cols))
+            parts["finger_hold"] = [self._held.index_select(1, self._delta_cols) - q.to(torch.float32)]
         if not self._obs_layout:
             a = 0
             for name, v in parts.items():
@@ -529,6 +540,8 @@ class WristMimicEnv:
             ref = ref + self.gravity_feedforward[f]
             residual = ref + self.cfg.residual_scale * a
             target = torch.where(self.residual_hinges, residual, target)
+        if self._delta_cols.numel():
+            target = torch.where(self.delta_hinges, self._held + self.cfg.finger_delta_scale * a, target)
         return torch.maximum(torch.minimum(target, self._hi), self._lo)
 
     def step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
@@ -541,7 +554,10 @@ class WristMimicEnv:
             torch.set_num_threads(threads)
 
     def _step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
-        self._ctrl[:, self._act_cols] = self.action_to_ctrl(action.detach().to(self.device, torch.float32))
+        ctrl = self.action_to_ctrl(action.detach().to(self.device, torch.float32))
+        self._ctrl[:, self._act_cols] = ctrl
+        if self._delta_cols.numel():
+            self._held = torch.where(self.delta_hinges, ctrl, self._held)
         if self.object_gain > 0.0 or (self.object_weight_gain or 0.0) > 0.0:
             self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench().flatten(1)
         if self.root_gain > 0.0:
@@ -718,6 +734,7 @@ class WristMimicEnv:
             "generator": self._gen.get_state(),
             "start_failures": None if self.starts is None else self.starts.failures.clone(),
             "lineage": self._lineage.clone(),
+            "finger_hold": self._held.clone(),
             **({} if self.bank is None else self.bank.state_dict()),
             "sequence_id": self.scene.sequence_id,
             "num_worlds": self.num_worlds,
@@ -742,6 +759,8 @@ class WristMimicEnv:
             self.starts.failures[:] = state["start_failures"]  # type: ignore[index]
         if state.get("lineage") is not None:
             self._lineage[:] = state["lineage"]  # type: ignore[index]
+        if state.get("finger_hold") is not None:
+            self._held[:] = state["finger_hold"]  # type: ignore[index]
         if self.bank is not None:
             self.bank.load_state_dict(state)  # type: ignore[arg-type]
 
