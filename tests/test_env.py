@@ -49,6 +49,37 @@ def test_reset_and_step_every_variant_and_humanoid(files, family: str, variant: 
     env.close()
 
 
+@pytest.mark.parametrize("family", ["smplx", "parahome"])
+def test_fingertip_guidance_reads_each_hands_tips_against_the_object_points(
+    files, family: str, request: pytest.FixtureRequest
+) -> None:
+    """On the synthetic SMPL-X clip and the real kettle (the synthetic ParaHome clip has no hand contact)."""
+    from dataclasses import replace
+
+    from wristmimic.env.config import RewardWeights
+
+    if family == "smplx":
+        path, sid = files[family]
+    else:
+        path, sid = request.getfixturevalue("parahome_h5"), "s110_move_kettle"
+    cfg = variant_config("wristmimic", weights=RewardWeights(fingertip=20.0))
+    env = WristMimicEnv.from_file(path, sid, num_worlds=3, config=cfg, seed=1, nthread=1)
+    touching = torch.nonzero(env.ref.hand.any(-1)).flatten()
+    assert touching.numel() > 2
+    env.reset(start_frames=(touching[[0, touching.numel() // 2, -1]] - 1).clamp(0, env.ref.num_frames - 3))
+    assert env.sets.fingertips.shape == (2, len(env.scene.humanoid.roles["left_fingertips"])) and env.sets.fingertips.numel() >= 2
+    _, _, _, _, info = env.step(torch.zeros(3, env.action_size))
+    s, rf = env.sim_state(), env.ref_frame(env.frame)
+    tips = s.body_pos[:, env.sets.fingertips]  # (N, 2, nt, 3)
+    d = (tips[:, :, :, None] - s.points[:, None, None]).norm(dim=-1).amin(-1).mean(-1)  # (N, 2)
+    want = (d * rf.hand).sum(-1)
+    assert rf.hand.any() and torch.equal(want > 0, rf.hand.any(-1))  # only hands in reference contact count
+    torch.testing.assert_close(info["terms"]["error/fingertip"], want, rtol=1e-4, atol=1e-5)
+    plain = WristMimicEnv.from_file(path, sid, 1, config=replace(cfg, weights=RewardWeights()), seed=1, nthread=1)
+    plain.reset()
+    assert "error/fingertip" not in plain.step(torch.zeros(1, plain.action_size))[4]["terms"]
+
+
 def test_goal_differences_are_zero_after_a_reference_reset(files) -> None:
     path, sid = files["smplx"]
     env = WristMimicEnv.from_file(path, sid, num_worlds=4, config=EnvConfig(goal_horizons=(0,)), nthread=1)

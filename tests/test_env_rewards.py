@@ -209,6 +209,21 @@ def test_feet_factor_tracks_the_feet_bodies_unweighted() -> None:
         compute_reward(x, SETS, variant_config("wristmimic", weights=w))  # toy SETS name no feet
 
 
+def test_fingertip_factor_is_the_mean_tip_distance_of_the_hands_in_reference_contact() -> None:
+    x = replace(toy_inputs(), tip_sq_dists=torch.tensor([[0.01, 0.04], [0.09, 0.0], [0.25, 0.25]])[:, :, None].expand(N, 2, 2).clone())
+    x.tip_sq_dists[:, :, 1] *= 4.0  # second tip twice as far: mean distance 1.5 x the first's
+    w = RewardWeights(fingertip=20.0)
+    reward, info = compute_reward(x, SETS, variant_config("wristmimic", weights=w))
+    base, _ = compute_reward(x, SETS, variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    # ref_hand: world 0 both hands (0.1 and 0.2 m -> 0.15 + 0.3), world 1 left only (0.3 m -> 0.45), world 2 none
+    _close(info["error/fingertip"], [0.45, 0.45, 0.0])
+    torch.testing.assert_close(info["reward/fingertip"], torch.exp(-20.0 * info["error/fingertip"]))
+    torch.testing.assert_close(reward, base * info["reward/fingertip"])
+    assert "fingertip" not in factor_names(variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    with pytest.raises(ValueError, match="fingertip"):
+        compute_reward(toy_inputs(), SETS, variant_config("wristmimic", weights=w))
+
+
 def test_window_modulation_zeroes_exactly_the_grasping_arm() -> None:
     x = toy_inputs()
     x.in_window = torch.tensor([True, True, False])

@@ -37,6 +37,8 @@ class BodySets:
     """Right wrist and its fingers."""
     feet: torch.Tensor
     """(4,) ankle and toe bodies of both legs (empty where the roles name none)."""
+    fingertips: torch.Tensor
+    """(2, nt) fingertip bodies [left hand, right hand] (the leaves of the finger subtrees)."""
 
     @classmethod
     def from_roles(cls, roles: dict[str, np.ndarray]) -> BodySets:
@@ -54,6 +56,7 @@ class BodySets:
             left_hand=_idx(roles["left_hand"]),
             right_hand=_idx(roles["right_hand"]),
             feet=_idx(roles.get("feet", [])),
+            fingertips=_idx(np.stack([np.asarray(roles.get(f"{h}_fingertips", []), int) for h in ("left", "right")])),
         )
 
     def to(self, device: torch.device | str) -> BodySets:

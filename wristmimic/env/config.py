@@ -64,6 +64,11 @@ class RewardWeights:
     weighting leaves the feet, far from a carried object, with almost no position reward and the window lowers
     their rotation lambda, so nothing asks the legs to step where the reference steps (DeepMimic's end-effector
     term)."""
+    fingertip: float = 0.0
+    """Contact guidance (1/m): exp(-fingertip * E), E = over the hands in reference contact, the mean distance of
+    the hand's fingertips to the nearest object surface point (the ``ig_points`` sample). It asks the fingers to
+    close on the object without any finger reference (the binary contact-hand factor is satisfied by one
+    touching segment); 0 turns the factor off."""
 
 
 @dataclass(frozen=True)

@@ -69,6 +69,9 @@ class RewardInputs:
     ig_sq_dists: torch.Tensor | None = None
     """(N, K, P) squared distances ig_pos -> points if already computed (the environment shares them with its
     nearest-point query); None: computed here."""
+    tip_sq_dists: torch.Tensor | None = None
+    """(N, 2, nt) squared distance of each hand's fingertips to the nearest object surface point; needed only
+    by the ``fingertip`` factor."""
     ref_ig_weights: torch.Tensor | None = None
     """(N, K, P) the reference's normalised interaction-graph weights :func:`ig_weights` if precomputed per
     frame; None: computed here from ref_ig_pos and ref_points."""
@@ -218,6 +221,14 @@ def error_contact_other(x: RewardInputs, sets: BodySets) -> torch.Tensor:
     return _weighted_mean(diff, mask)
 
 
+def error_fingertip(x: RewardInputs) -> torch.Tensor:
+    """E = sum over the hands in reference contact of the mean fingertip distance to the object surface (m)."""
+    if x.tip_sq_dists is None:
+        raise ValueError("weights.fingertip > 0 needs the fingertips' distances to the object (tip_sq_dists)")
+    d = x.tip_sq_dists.clamp_min(0.0).sqrt().mean(-1)
+    return (d * x.ref_hand.to(d.dtype)).sum(-1)
+
+
 def error_joint_energy(x: RewardInputs) -> torch.Tensor:
     """E_eg1 = mean over hinges of ((qd - qd_prev) / dt)^2 (joint acceleration)."""
     return _mean(((x.joint_vel - x.prev_joint_vel) / x.dt).square(), (1,))
@@ -265,6 +276,7 @@ def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
     if cfg.finger_targets:
         names += ["finger_pos", "finger_rot"]
     names += ["obj_pos", "obj_rot", "ig", "contact_hand", "contact_other"]
+    names += ["fingertip"] if cfg.weights.fingertip > 0 else []
     names += ["joint_energy", "obj_energy_lin", "obj_energy_ang", "contact_energy"]
     return tuple(names)
 
@@ -307,6 +319,8 @@ def compute_reward(
     errors["obj_rot"], lams["obj_rot"] = error_obj_rot(obj_ang), w.orot
     errors["ig"], lams["ig"] = error_ig(x, consts.ig_min_sq_dist), w.ig
     errors["contact_other"], lams["contact_other"] = error_contact_other(x, sets), w.cg_other
+    if w.fingertip > 0:
+        errors["fingertip"], lams["fingertip"] = error_fingertip(x), w.fingertip
     active = x.step >= consts.energy_start_step
     for name, fn, lam in (
         ("joint_energy", error_joint_energy, w.eg1),

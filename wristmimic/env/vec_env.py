@@ -694,8 +694,19 @@ class WristMimicEnv:
             dt=self.scene.config.control_dt,
             ig_sq_dists=None if sq is None else sq[:, : len(key)],
             ref_ig_weights=None if self._ref_ig_w is None else self._ref_ig_w.index_select(0, f),
+            tip_sq_dists=self._tip_sq_dists(s, sq) if self.cfg.weights.fingertip > 0 else None,
         )
         return compute_reward(x, self.sets, self.cfg)
+
+    def _tip_sq_dists(self, s: SimState, sq: torch.Tensor | None) -> torch.Tensor:
+        """(N, 2, nt) squared distance of each hand's fingertips to their nearest object surface point."""
+        tips = self.sets.fingertips
+        if sq is None:
+            sq = self._point_sq_dists(s)
+        if sq is None:  # no dynamic object: nothing to close on
+            return torch.zeros(s.body_pos.shape[0], *tips.shape, device=self.device)
+        rows = self._sq_unperm.index_select(0, tips.flatten())
+        return sq.index_select(1, rows).amin(-1).view(-1, *tips.shape)
 
     def _terminations(
         self, s: SimState, rf: RefFrame, sim_hand: torch.Tensor, ph: torch.Tensor
