@@ -67,7 +67,10 @@ def test_fingertip_guidance_reads_each_hands_tips_against_the_object_points(
     touching = torch.nonzero(env.ref.hand.any(-1)).flatten()
     assert touching.numel() > 2
     env.reset(start_frames=(touching[[0, touching.numel() // 2, -1]] - 1).clamp(0, env.ref.num_frames - 3))
-    assert env.sets.fingertips.shape == (2, len(env.scene.humanoid.roles["left_fingertips"])) and env.sets.fingertips.numel() >= 2
+    assert (
+        env.sets.fingertips.shape == (2, len(env.scene.humanoid.roles["left_fingertips"]))
+        and env.sets.fingertips.numel() >= 2
+    )
     _, _, _, _, info = env.step(torch.zeros(3, env.action_size))
     s, rf = env.sim_state(), env.ref_frame(env.frame)
     tips = s.body_pos[:, env.sets.fingertips]  # (N, 2, nt, 3)

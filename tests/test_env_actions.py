@@ -124,7 +124,10 @@ def test_delta_fingers_hold_the_start_pose_and_move_by_the_scale_each_step(datas
     env = _env(dataset, finger_action="delta", finger_delta_scale=0.05)
     plain = _env(dataset)
     fingers = env.delta_hinges.numpy()
-    assert fingers.sum() == 3 * len(env.scene.humanoid.roles["fingers"]) and not (fingers & env.residual_hinges.numpy()).any()
+    assert (
+        fingers.sum() == 3 * len(env.scene.humanoid.roles["fingers"])
+        and not (fingers & env.residual_hinges.numpy()).any()
+    )
     lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
     start = np.clip(env.ref.joint_angles[torch.tensor([0, 5, 11])].numpy(), lo, hi)
     a = torch.zeros(3, env.action_size)
@@ -153,7 +156,12 @@ def test_delta_fingers_hold_the_start_pose_and_move_by_the_scale_each_step(datas
 
 @pytest.mark.parametrize(
     "mode, gravity, fingers",
-    [("residual", False, "absolute"), ("residual", True, "absolute"), ("absolute", False, "absolute"), ("residual", False, "delta")],
+    [
+        ("residual", False, "absolute"),
+        ("residual", True, "absolute"),
+        ("absolute", False, "absolute"),
+        ("residual", False, "delta"),
+    ],
 )
 def test_train_evaluate_and_view_map_actions_the_same_way(
     dataset: Path, tmp_path: Path, mode: str, gravity: bool, fingers: str

@@ -210,7 +210,10 @@ def test_feet_factor_tracks_the_feet_bodies_unweighted() -> None:
 
 
 def test_fingertip_factor_is_the_mean_tip_distance_of_the_hands_in_reference_contact() -> None:
-    x = replace(toy_inputs(), tip_sq_dists=torch.tensor([[0.01, 0.04], [0.09, 0.0], [0.25, 0.25]])[:, :, None].expand(N, 2, 2).clone())
+    x = replace(
+        toy_inputs(),
+        tip_sq_dists=torch.tensor([[0.01, 0.04], [0.09, 0.0], [0.25, 0.25]])[:, :, None].expand(N, 2, 2).clone(),
+    )
     x.tip_sq_dists[:, :, 1] *= 4.0  # second tip twice as far: mean distance 1.5 x the first's
     w = RewardWeights(fingertip=20.0)
     reward, info = compute_reward(x, SETS, variant_config("wristmimic", weights=w))

@@ -8,8 +8,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 ACTION_MODES = ("residual", "absolute")
-FINGER_ACTIONS = ("absolute", "delta")
 """How policy actions become PD targets (:attr:`EnvConfig.action_mode`)."""
+FINGER_ACTIONS = ("absolute", "delta")
+"""How finger actions become PD targets (:attr:`EnvConfig.finger_action`)."""
 
 VARIANTS = ("wristmimic", "decoupled", "reward-modulation-only", "reset-only", "finger-guidance", "intermimic")
 

@@ -188,7 +188,9 @@ class WristMimicEnv:
             np.repeat(~finger_joint, 3) & (self.cfg.action_mode == "residual"), device=dev
         )
         """(J*3,) bool: hinges whose PD target is reference + residual_scale * a (none in absolute mode)."""
-        self.delta_hinges = torch.as_tensor(np.repeat(finger_joint, 3) & (self.cfg.finger_action == "delta"), device=dev)
+        self.delta_hinges = torch.as_tensor(
+            np.repeat(finger_joint, 3) & (self.cfg.finger_action == "delta"), device=dev
+        )
         """(J*3,) bool: finger hinges with a held target moved by finger_delta_scale * a (``finger_action``)."""
         self._delta_cols = self.delta_hinges.nonzero().flatten()
         self._held = torch.zeros(N, len(self.delta_hinges), device=dev)
@@ -408,7 +410,7 @@ class WristMimicEnv:
         self.backend.reset(mask, qpos, qvel)
         if self._delta_cols.numel():  # a reset holds the start state's finger angles
             start = qpos[:, self._hinge_qpos].to(torch.float32)
-            self._held = torch.where(mask[:, None], torch.maximum(torch.minimum(start, self._hi), self._lo), self._held)
+            self._held = torch.where(mask[:, None], start.clamp(self._lo, self._hi), self._held)
         r, col = self.ref, mask[:, None]
         self.frame = torch.where(mask, f, self.frame)
         self.start = torch.where(mask, f, self.start)
