@@ -111,6 +111,24 @@ def test_absolute_mode_is_intermimic_mapping_and_unknown_modes_are_refused(datas
         _env(dataset, action_mode="delta")
 
 
+def test_range_fingers_span_exactly_each_finger_range_and_leave_the_body_alone(dataset: Path) -> None:
+    """``finger_action=range``: a = -1 / 0 / +1 put every finger hinge at its lower limit / mid-range / upper limit
+    (``absolute`` puts the off-centre flexing hinges at 0 for a = 0 and saturates them); body hinges unchanged."""
+    env, plain = _env(dataset, finger_action="range"), _env(dataset)
+    fingers = np.repeat(np.isin(env.scene.skeleton.joint_bodies, env.scene.humanoid.roles["fingers"]), 3)
+    lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
+    off_centre = fingers & (np.abs((lo + hi) / 2) > 0.1)
+    assert off_centre.sum() >= 10  # the last segment of each finger flexes one way only
+    a = torch.tensor([-1.0, 0.0, 1.0])[:, None].expand(3, env.action_size)
+    frames = torch.tensor([0, 5, 9])
+    ctrl, base = env.action_to_ctrl(a, frames).numpy(), plain.action_to_ctrl(a, frames).numpy()
+    np.testing.assert_allclose(ctrl[:, fingers], np.stack([lo, (lo + hi) / 2, hi])[:, fingers], atol=1e-6)
+    np.testing.assert_array_equal(ctrl[:, ~fingers], base[:, ~fingers])
+    assert np.abs(base[1, off_centre]).max() < 1e-6  # absolute: a = 0 is 0 rad on those hinges
+    half = torch.full((1, env.action_size), 0.5)  # absolute: already at the range's end at a = 0.5
+    np.testing.assert_allclose(plain.action_to_ctrl(half).numpy()[0, off_centre], hi[off_centre], atol=1e-6)
+
+
 def test_runs_recorded_before_action_modes_read_as_absolute() -> None:
     old = to_jsonable(EnvConfig())
     for key in ("action_mode", "velocity_feedforward", "residual_scale", "object_controller", "starts"):
@@ -161,6 +179,7 @@ def test_delta_fingers_hold_the_start_pose_and_move_by_the_scale_each_step(datas
         ("residual", True, "absolute"),
         ("absolute", False, "absolute"),
         ("residual", False, "delta"),
+        ("residual", False, "range"),
     ],
 )
 def test_train_evaluate_and_view_map_actions_the_same_way(

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, replace
 
 ACTION_MODES = ("residual", "absolute")
 """How policy actions become PD targets (:attr:`EnvConfig.action_mode`)."""
-FINGER_ACTIONS = ("absolute", "delta")
+FINGER_ACTIONS = ("absolute", "delta", "range")
 """How finger actions become PD targets (:attr:`EnvConfig.finger_action`)."""
 
 VARIANTS = ("wristmimic", "decoupled", "reward-modulation-only", "reset-only", "finger-guidance", "intermimic")
@@ -312,7 +312,11 @@ class EnvConfig:
     action_scale * scale * a, as above (a = 0 is the mid-range hand). ``delta``: each finger hinge keeps a held
     target, moved by ``finger_delta_scale * a`` every control step and clipped to its range; a reset sets it to
     the start state's angle, so a = 0 holds the current grip (DexMachina-style relative finger control). The
-    held target minus the finger angle is then part of the observation (``finger_hold``)."""
+    held target minus the finger angle is then part of the observation (``finger_hold``). ``range``: like
+    ``absolute``, but every finger hinge maps [-1, 1] onto exactly its joint range (mid-range offset, half-range
+    scale), where ``absolute`` keeps InterMimic's rule for hinges whose range is off-centre (offset 0, scale pi:
+    the flexing last segments, [-5.6, 90] deg, then see 3.4x the exploration noise of the others, 0.31 rad at
+    sigma 0.1, and saturate for two thirds of the action interval)."""
     finger_delta_scale: float = 0.1
     """rad per unit action per control step of a ``delta`` finger target (a full 1.6 rad closure in 16 steps)."""
 

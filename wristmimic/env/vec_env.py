@@ -174,7 +174,10 @@ class WristMimicEnv:
         # action -> PD target (InterMimic): mid-range offset and half-range scale; wide joints centred at 0
         lo, hi = scene.ctrl_range[:, 0], scene.ctrl_range[:, 1]
         offset, scale = (lo + hi) / 2, (hi - lo) / 2
+        finger_joint = np.isin(scene.skeleton.joint_bodies, np.asarray(roles["fingers"]))
         wide = np.abs(offset) > 0.1
+        if self.cfg.finger_action == "range":  # finger actions span exactly each finger hinge's range
+            wide &= ~np.repeat(finger_joint, 3)
         offset[wide], scale[wide] = 0.0, np.pi
 
         def f32(a: np.ndarray) -> torch.Tensor:
@@ -183,7 +186,6 @@ class WristMimicEnv:
         self._offset, self._scale = f32(offset), f32(scale * self.cfg.action_scale)
         self._lo, self._hi = f32(lo), f32(hi)
         # residual mode: body and wrist hinges around the reference of the next frame, fingers absolute
-        finger_joint = np.isin(scene.skeleton.joint_bodies, np.asarray(roles["fingers"]))
         self.residual_hinges = torch.as_tensor(
             np.repeat(~finger_joint, 3) & (self.cfg.action_mode == "residual"), device=dev
         )
