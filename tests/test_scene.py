@@ -141,6 +141,34 @@ def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: t
                 build_scene(ds, "sub1_box_000", bad)
 
 
+def test_reference_finger_ranges_contain_parahome_grips_that_intermimic_ranges_cut(parahome_h5: Path) -> None:
+    """ParaHome's finger poses fall outside InterMimic's SMPL-X ranges; ``finger_ranges=reference`` only widens the
+    finger hinges' ranges, to the sequence's own angles plus the margin; body hinges and targets are unchanged."""
+    from wristmimic.errors import InputError
+
+    with open_dataset(parahome_h5) as ds:
+        sid = "s110_move_kettle" if "s110_move_kettle" in ds.sequence_ids else ds.sequence_ids[0]
+        old, new = build_scene(ds, sid), build_scene(ds, sid, SceneConfig(finger_ranges="reference"))
+        a = ds.sequence(sid).load().joint_angles.reshape(-1, old.ctrl_range.shape[0])
+        for bad in (SceneConfig(finger_ranges="anatomical"), SceneConfig(finger_range_margin=-0.1)):
+            with pytest.raises(InputError, match="finger_ranges"):
+                build_scene(ds, sid, bad)
+    fingers = np.repeat(np.isin(old.skeleton.joint_bodies, old.humanoid.roles["fingers"]), 3)
+
+    def outside(sc) -> np.ndarray:
+        return (a < sc.ctrl_range[:, 0] - 1e-6) | (a > sc.ctrl_range[:, 1] + 1e-6)
+
+    assert outside(old)[:, fingers].mean() > 0.1 and not outside(old)[:, ~fingers].any()
+    assert not outside(new).any()
+    np.testing.assert_array_equal(new.ctrl_range[~fingers], old.ctrl_range[~fingers])
+    assert np.all(new.ctrl_range[:, 0] <= old.ctrl_range[:, 0]) and np.all(new.ctrl_range[:, 1] >= old.ctrl_range[:, 1])
+    margin = SceneConfig().finger_range_margin
+    widened = new.ctrl_range[:, 1] > old.ctrl_range[:, 1]
+    np.testing.assert_allclose(new.ctrl_range[widened, 1], a.max(0)[widened] + margin, atol=1e-6)
+    hinge_range = new.model.jnt_range[new.model.dof_jntid[new.hinge_dofadr.reshape(-1)]]
+    np.testing.assert_allclose(hinge_range, new.ctrl_range)  # the joint limits move with the targets
+
+
 def test_every_colliding_geom_has_friction_even_where_the_source_says_condim_1(tmp_path: Path) -> None:
     """SkillMimic's ParaHome humanoid says condim 1 (frictionless in MuJoCo; Isaac Gym ignores it): the scene gives
     every colliding geom (humanoid, floor, supports, objects) sliding friction; runs recorded before keep it."""

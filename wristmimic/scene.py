@@ -103,6 +103,16 @@ class SceneConfig:
     records the density it used, 1000 for OMOMO and ParaHome conversions); None keeps them. InterMimic trained
     OMOMO with 200 (``omomo_train.yaml``; 1000 in ``omomo_train_new.yaml``): sub2's large table weighs 20.4 kg at
     1000 and 4.1 kg at 200."""
+    finger_ranges: str = "intermimic"
+    """Finger joint ranges: ``intermimic`` (:func:`finger_ranges`, written for SMPL-X's joint frames) or
+    ``reference``: each finger hinge's InterMimic range widened to contain the sequence's own finger angles plus
+    ``finger_range_margin``. ParaHome's skeleton (SkillMimic's MJCF declares +-180 deg) has joint frames of its own
+    (the metacarpals' rest splay, the thumb base turned up to 98 deg): InterMimic's ranges cut 20-27 % of its
+    finger hinge-frames, by up to 1.9 rad, so its grips are out of reach and a reference start begins outside the
+    joint limits. OMOMO and the synthetic scenes lie inside InterMimic's ranges (only the margin can widen theirs).
+    Only the limits come from the reference: finger targets still use none. Swapped hands keep their MJCF's."""
+    finger_range_margin: float = 0.1
+    """rad added on both sides of the reference's own range under ``finger_ranges=reference``."""
     max_hull_vertices: int = 64
     floor: bool = True
     visual_meshes: bool = True
@@ -253,13 +263,24 @@ def _strip_source_extras(spec: mujoco.MjSpec) -> None:
 
 
 def _humanoid(
-    spec: mujoco.MjSpec, skel: Skeleton, roles: dict[str, np.ndarray], cfg: SceneConfig, own_ranges: bool = False
+    spec: mujoco.MjSpec,
+    skel: Skeleton,
+    roles: dict[str, np.ndarray],
+    cfg: SceneConfig,
+    own_ranges: bool = False,
+    envelope: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Re-actuate the humanoid in ``spec``; returns (J*3, 2) gains in hinge order. Finger ranges are InterMimic's
-    (:func:`finger_ranges`) unless ``own_ranges`` (a swapped hand carries its ranges in the MJCF)."""
+    (:func:`finger_ranges`), widened to ``envelope`` ((J, 3) low, high) when given, unless ``own_ranges`` (a
+    swapped hand carries its ranges in the MJCF)."""
     groups = gain_groups(skel, roles)
     gain_of = {b: getattr(cfg.gains, g) for g, bodies in groups.items() for b in bodies}
     franges = {} if own_ranges else finger_ranges(skel, roles)
+    if envelope is not None:
+        row = {int(b): j for j, b in enumerate(skel.joint_bodies)}
+        for b, r in franges.items():
+            lo, hi = envelope[0][row[b]], envelope[1][row[b]]
+            franges[b] = np.stack([np.minimum(r[:, 0], lo), np.maximum(r[:, 1], hi)], axis=1)
     gains = []
     for j, b in enumerate(skel.joint_bodies):
         body = spec.body(skel.body_names[b])
@@ -353,6 +374,8 @@ def _add_object(
 
 
 SOLVERS, CONES = ("newton", "cg", "pgs"), ("pyramidal", "elliptic")
+FINGER_RANGES = ("intermimic", "reference")
+"""Values of :attr:`SceneConfig.finger_ranges`."""
 
 
 def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
@@ -368,6 +391,15 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
             raise InputError(
                 None, f"scene_config.{name}", f"invalid value {v!r}", "None or a finite number > 0 (kg/m^3)"
             )
+    if cfg.finger_ranges not in FINGER_RANGES or not (
+        np.isfinite(cfg.finger_range_margin) and cfg.finger_range_margin >= 0
+    ):
+        raise InputError(
+            None,
+            "scene_config.finger_ranges",
+            f"{cfg.finger_ranges!r} with margin {cfg.finger_range_margin!r}",
+            f"one of {', '.join(FINGER_RANGES)} and a finite margin >= 0 (rad)",
+        )
     for name in ("object_friction", "support_friction"):
         v = getattr(cfg, name)
         if v is not None and not (np.isfinite(v) and v >= 0):
@@ -391,7 +423,11 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
     spec.option.timestep = cfg.timestep
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{cfg.integrator.upper()}")
     _set_solver(spec, cfg)
-    gains = _humanoid(spec, skel, hum.roles, cfg, own_ranges=bool(hum.hand))
+    envelope = None
+    if cfg.finger_ranges == "reference":
+        a = seq.array("joint_angles")
+        envelope = (a.min(0) - cfg.finger_range_margin, a.max(0) + cfg.finger_range_margin)
+    gains = _humanoid(spec, skel, hum.roles, cfg, own_ranges=bool(hum.hand), envelope=envelope)
     if cfg.floor:
         floor = spec.worldbody.add_geom(
             name="floor",
