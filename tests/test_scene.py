@@ -141,9 +141,19 @@ def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: t
                 build_scene(ds, "sub1_box_000", bad)
 
 
+def test_reference_finger_ranges_change_nothing_where_the_reference_stays_inside(omomo_h5: Path) -> None:
+    """OMOMO's finger poses lie inside InterMimic's ranges: both settings build the same scene."""
+    with open_dataset(omomo_h5) as ds:
+        sid = ds.sequence_ids[0]
+        a = build_scene(ds, sid)
+        b = build_scene(ds, sid, SceneConfig(finger_ranges="reference"))
+    np.testing.assert_array_equal(a.ctrl_range, b.ctrl_range)
+    np.testing.assert_array_equal(a.model.jnt_range, b.model.jnt_range)
+
+
 def test_reference_finger_ranges_contain_parahome_grips_that_intermimic_ranges_cut(parahome_h5: Path) -> None:
-    """ParaHome's finger poses fall outside InterMimic's SMPL-X ranges; ``finger_ranges=reference`` only widens the
-    finger hinges' ranges, to the sequence's own angles plus the margin; body hinges and targets are unchanged."""
+    """ParaHome's finger poses fall outside InterMimic's SMPL-X ranges; ``finger_ranges=reference`` moves only the
+    range ends the sequence's own finger angles pass, to them plus the margin; body hinges are unchanged."""
     from wristmimic.errors import InputError
 
     with open_dataset(parahome_h5) as ds:
@@ -165,6 +175,7 @@ def test_reference_finger_ranges_contain_parahome_grips_that_intermimic_ranges_c
     margin = SceneConfig().finger_range_margin
     widened = new.ctrl_range[:, 1] > old.ctrl_range[:, 1]
     np.testing.assert_allclose(new.ctrl_range[widened, 1], a.max(0)[widened] + margin, atol=1e-6)
+    np.testing.assert_array_equal(widened, a.max(0) > old.ctrl_range[:, 1] + 1e-6)  # only ends the reference passes
     hinge_range = new.model.jnt_range[new.model.dof_jntid[new.hinge_dofadr.reshape(-1)]]
     np.testing.assert_allclose(hinge_range, new.ctrl_range)  # the joint limits move with the targets
 

@@ -105,14 +105,15 @@ class SceneConfig:
     1000 and 4.1 kg at 200."""
     finger_ranges: str = "intermimic"
     """Finger joint ranges: ``intermimic`` (:func:`finger_ranges`, written for SMPL-X's joint frames) or
-    ``reference``: each finger hinge's InterMimic range widened to contain the sequence's own finger angles plus
-    ``finger_range_margin``. ParaHome's skeleton (SkillMimic's MJCF declares +-180 deg) has joint frames of its own
+    ``reference``: where the sequence's own finger angles leave a finger hinge's InterMimic range, that end moves
+    to the reference's extreme plus ``finger_range_margin``; ranges the reference stays inside are unchanged. ParaHome's skeleton (SkillMimic's MJCF declares +-180 deg) has joint frames of its own
     (the metacarpals' rest splay, the thumb base turned up to 98 deg): InterMimic's ranges cut 20-27 % of its
     finger hinge-frames, by up to 1.9 rad, so its grips are out of reach and a reference start begins outside the
-    joint limits. OMOMO and the synthetic scenes lie inside InterMimic's ranges (only the margin can widen theirs).
-    Only the limits come from the reference: finger targets still use none. Swapped hands keep their MJCF's."""
+    joint limits. OMOMO and the synthetic scenes lie inside InterMimic's ranges, so both settings build the same
+    scene for them. Only the limits come from the reference: finger targets still use none. Swapped hands keep
+    their MJCF's."""
     finger_range_margin: float = 0.1
-    """rad added on both sides of the reference's own range under ``finger_ranges=reference``."""
+    """rad beyond the reference's extreme angle where ``finger_ranges=reference`` moves a range end."""
     max_hull_vertices: int = 64
     floor: bool = True
     visual_meshes: bool = True
@@ -271,16 +272,20 @@ def _humanoid(
     envelope: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Re-actuate the humanoid in ``spec``; returns (J*3, 2) gains in hinge order. Finger ranges are InterMimic's
-    (:func:`finger_ranges`), widened to ``envelope`` ((J, 3) low, high) when given, unless ``own_ranges`` (a
-    swapped hand carries its ranges in the MJCF)."""
+    (:func:`finger_ranges`), unless ``own_ranges`` (a swapped hand carries its ranges in the MJCF); with
+    ``envelope`` ((J, 3) lowest and highest reference angles) an end the reference passes moves to it plus
+    ``cfg.finger_range_margin``."""
     groups = gain_groups(skel, roles)
     gain_of = {b: getattr(cfg.gains, g) for g, bodies in groups.items() for b in bodies}
     franges = {} if own_ranges else finger_ranges(skel, roles)
-    if envelope is not None:
+    if envelope is not None:  # widen only the ends the reference passes, to its extreme plus the margin
         row = {int(b): j for j, b in enumerate(skel.joint_bodies)}
+        (amin, amax), margin = envelope, cfg.finger_range_margin
         for b, r in franges.items():
-            lo, hi = envelope[0][row[b]], envelope[1][row[b]]
-            franges[b] = np.stack([np.minimum(r[:, 0], lo), np.maximum(r[:, 1], hi)], axis=1)
+            lo, hi = amin[row[b]], amax[row[b]]
+            franges[b] = np.stack(
+                [np.where(lo < r[:, 0], lo - margin, r[:, 0]), np.where(hi > r[:, 1], hi + margin, r[:, 1])], 1
+            )
     gains = []
     for j, b in enumerate(skel.joint_bodies):
         body = spec.body(skel.body_names[b])
@@ -426,7 +431,7 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
     envelope = None
     if cfg.finger_ranges == "reference":
         a = seq.array("joint_angles")
-        envelope = (a.min(0) - cfg.finger_range_margin, a.max(0) + cfg.finger_range_margin)
+        envelope = (a.min(0), a.max(0))
     gains = _humanoid(spec, skel, hum.roles, cfg, own_ranges=bool(hum.hand), envelope=envelope)
     if cfg.floor:
         floor = spec.worldbody.add_geom(
