@@ -141,7 +141,8 @@ def run_trials(
     """
     before = torch.get_num_threads()
     torch.set_num_threads(threads or env.cfg.math_threads)
-    ids = None if trial_ids is None else torch.as_tensor(np.asarray(trial_ids), dtype=torch.long)
+    # a copy (torch.tensor): callers may pass read-only arrays, which torch.as_tensor would share and warn about
+    ids = None if trial_ids is None else torch.tensor(np.asarray(trial_ids), dtype=torch.long)
     try:
         return _run(env, policy, settings, start, stop, sink, recorder, ids)
     finally:
