@@ -21,7 +21,7 @@ SCENE = "synth_default"
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Sizes of the demo. ``quick`` is for CI (under 3 minutes on 2 cores), the default 10-20 minutes (see README)."""
+    """Sizes of the demo. ``quick`` is for CI (under 3 minutes on 2 cores), the default 10-25 minutes (see README)."""
 
     out: Path = Path("outputs/demo")
     """Everything goes here: demo.h5, run/, eval/, report/, demo.rrd."""

@@ -20,7 +20,7 @@ def demo_cmd(
 ) -> None:
     """Generate the built-in synthetic scene (no dataset or licensed file needed), train a WristMimic policy
     briefly on the CPU preset, evaluate it, write the report and a rerun recording, and say where they are.
-    Takes 10-20 minutes on a 2-core machine (--quick: under 3).
+    Takes 10-25 minutes on a 2-core machine, as fast as the host runs (--quick: under 3).
 
     Example: wristmimic demo --quick
     """
@@ -37,9 +37,7 @@ def demo_cmd(
             check_output_folder(out / name)
         for name in ("demo.h5", "demo.rrd"):
             check_output_file(out / name)
-    typer.echo(
-        f"wristmimic demo: {'under 3' if quick else '10-20'} minutes on a 2-core machine; outputs in {cfg.out}/"
-    )
+    typer.echo(f"wristmimic demo: {'under 3' if quick else '10-25'} minutes on a 2-core machine; outputs in {cfg.out}/")
     with user_errors():
         r = run_demo(cfg, nthread=nthread, echo=typer.echo)
     took = ", ".join(f"{k} {v:.0f} s" for k, v in r.seconds.items())
