@@ -106,7 +106,8 @@ class SceneConfig:
     finger_ranges: str = "intermimic"
     """Finger joint ranges: ``intermimic`` (:func:`finger_ranges`, written for SMPL-X's joint frames) or
     ``reference``: where the sequence's own finger angles leave a finger hinge's InterMimic range, that end moves
-    to the reference's extreme plus ``finger_range_margin``; ranges the reference stays inside are unchanged. ParaHome's skeleton (SkillMimic's MJCF declares +-180 deg) has joint frames of its own
+    to the reference's extreme plus ``finger_range_margin``; ranges the reference stays inside are unchanged.
+    ParaHome's skeleton (SkillMimic's MJCF declares +-180 deg) has joint frames of its own
     (the metacarpals' rest splay, the thumb base turned up to 98 deg): InterMimic's ranges cut 20-27 % of its
     finger hinge-frames, by up to 1.9 rad, so its grips are out of reach and a reference start begins outside the
     joint limits. OMOMO and the synthetic scenes lie inside InterMimic's ranges, so both settings build the same
