@@ -120,6 +120,41 @@ def test_batched_equals_one_world_at_a_time(files) -> None:
             assert te[0] == out_b[k][2][w] and tr[0] == out_b[k][3][w]
 
 
+def test_prepare_and_finish_step_on_a_worker_thread_equal_step(files) -> None:
+    """benchmarks/async_overlap.py's schedule: two environments in alternation, one's physics on a worker thread
+    while the main thread finishes the other's step, give bit for bit what plain ``step`` gives (auto-resets
+    included: episodes end on the default terminations under large actions)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    path, sid = files["smplx"]
+    actions = torch.rand(12, 2, 4, 153, generator=torch.Generator().manual_seed(5)) * 2 - 1
+
+    def pair() -> list[WristMimicEnv]:
+        envs = [WristMimicEnv.from_file(path, sid, num_worlds=4, seed=k, nthread=2) for k in range(2)]
+        for e in envs:
+            e.reset()
+        return envs
+
+    plain = pair()
+    ref = [[plain[k].step(a[k]) for k in range(2)] for a in actions]
+    split = pair()
+    sub = split[0].scene.config.substeps
+    with ThreadPoolExecutor(1) as pool:
+        for t, a in enumerate(actions):
+            ja = pool.submit(split[0].backend.step, split[0].prepare_step(a[0]), sub)
+            ja.result()
+            jb = pool.submit(split[1].backend.step, split[1].prepare_step(a[1]), sub)
+            got_a = split[0].finish_step(a[0])  # runs while b's physics runs
+            jb.result()
+            got_b = split[1].finish_step(a[1])
+            for k, got in enumerate((got_a, got_b)):
+                for x, y in zip(got[:4], ref[t][k][:4], strict=True):
+                    assert torch.equal(x, y), (t, k)
+                assert torch.equal(got[4]["termination_reason"], ref[t][k][4]["termination_reason"])
+    ends = sum(int(ref[t][k][2].sum()) for t in range(len(actions)) for k in range(2))
+    assert ends > 0  # the schedule went through auto-resets
+
+
 def test_truncation_at_sequence_end_and_auto_reset(files) -> None:
     path, sid = files["smplx"]
     env = WristMimicEnv.from_file(

@@ -558,6 +558,14 @@ class WristMimicEnv:
             torch.set_num_threads(threads)
 
     def _step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
+        self.prepare_step(action)
+        self.backend.step(self._ctrl, self.scene.config.substeps)
+        return self.finish_step(action)
+
+    def prepare_step(self, action: torch.Tensor) -> torch.Tensor:
+        """The first part of :meth:`step`: actions -> the (N, nu) controls to hold for this step (returned; the
+        environment's own buffer). A caller that runs the physics itself (e.g. asynchronously, overlapping another
+        batch's math) then calls ``backend.step(ctrl, scene.config.substeps)`` and :meth:`finish_step`."""
         ctrl = self.action_to_ctrl(action.detach().to(self.device, torch.float32))
         self._ctrl[:, self._act_cols] = ctrl
         if self._delta_cols.numel():
@@ -566,7 +574,11 @@ class WristMimicEnv:
             self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench().flatten(1)
         if self.root_gain > 0.0:
             self._ctrl[:, self._rac_cols] = self.root_wrench()
-        self.backend.step(self._ctrl, self.scene.config.substeps)
+        return self._ctrl
+
+    def finish_step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
+        """The rest of :meth:`step` once the physics has advanced: observations, rewards, terminations and
+        resets, as :meth:`step` returns them (``action``: the one given to :meth:`prepare_step`)."""
         self.frame += 1
         self.steps += 1
         s = self.sim_state()
