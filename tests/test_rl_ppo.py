@@ -181,6 +181,45 @@ def test_adaptive_update_logs_rate_and_sigma_and_keeps_kl_near_the_target() -> N
     assert any(p is net.log_std_param for p in alg.optimizer.param_groups[0]["params"])
 
 
+def test_log_std_rate_of_its_own_moves_sigma_at_that_rate_outside_the_schedule() -> None:
+    """With ``log_std_learning_rate`` the log-std is its own Adam group: the adaptive schedule moves the actor's
+    rate only, and sigma moves about that rate per optimiser step (Adam), not the actor's."""
+
+    def run(log_std_lr: float | None, schedule: str = "fixed") -> tuple[PPO, float]:
+        torch.manual_seed(0)
+        net = ActorCritic(4, 2, (32,), (32,), log_std=-1.0, learn_std=True)
+        cfg = PPOConfig(
+            num_envs=8,
+            horizon=4,
+            minibatch_size=8,
+            epochs=2,
+            schedule=schedule,
+            learning_rate=1e-5,
+            lr_min=1e-6,
+            learn_std=True,
+            log_std_learning_rate=log_std_lr,
+        )
+        alg = PPO(net, cfg)
+        st = _filled_storage(net)
+        alg.compute_returns(st, torch.zeros(8))
+        alg.update(st, torch.Generator().manual_seed(0))
+        return alg, float((net.log_std.detach() + 1.0).abs().max())
+
+    _, moved_shared = run(None)
+    _, moved_own = run(1e-2)
+    steps = 2 * 4  # epochs x minibatches
+    assert moved_shared <= steps * 1e-5 * 1.01
+    assert 0.5e-2 < moved_own <= steps * 1e-2 * 1.01
+    own, _ = run(1e-2, "adaptive")
+    groups = own.optimizer.param_groups
+    assert len(groups) == 2 and groups[-1]["params"] == [own.policy.log_std_param]
+    assert groups[-1]["lr"] == 1e-2 and own.learning_rate != 1e-2
+    with pytest.raises(InputError, match="log_std_learning_rate"):
+        PPOConfig(log_std_learning_rate=1e-3)  # sigma is not learned
+    with pytest.raises(InputError, match="log_std_learning_rate"):
+        PPOConfig(learn_std=True, log_std_learning_rate=0.0)
+
+
 def test_learned_sigma_is_a_parameter_with_a_floor_and_old_checkpoints_load() -> None:
     net = ActorCritic(6, 3, (16,), (16,), log_std=-1.0, learn_std=True, min_log_std=-2.0)
     assert "log_std_param" in dict(net.named_parameters())

@@ -49,16 +49,20 @@ class PPO:
     def __init__(self, policy: ActorCritic, cfg: PPOConfig):
         self.policy, self.cfg = policy, cfg
         actor = [*policy.actor.parameters()]
-        if isinstance(policy.log_std_param, nn.Parameter):
-            actor.append(policy.log_std_param)
+        log_std = [policy.log_std_param] if isinstance(policy.log_std_param, nn.Parameter) else []
+        if cfg.log_std_learning_rate is None:
+            actor, log_std = actor + log_std, []
         critic = [*policy.critic.parameters()]
         if cfg.critic_learning_rate is None:
             groups = [{"params": actor + critic}]
         else:  # the critic keeps its own fixed rate; the schedule moves the actor's group only
             groups = [{"params": actor}, {"params": critic, "lr": cfg.critic_learning_rate}]
+        if log_std:  # a fixed rate of its own, outside the schedule
+            groups.append({"params": log_std, "lr": cfg.log_std_learning_rate})
         # fused: one kernel over all parameters (on 2 CPU threads 4x faster than the per-tensor loop for the CPU
         # preset's 2.1 M parameters); needs float32 parameters on a CPU or CUDA device
-        fused = all(p.dtype == torch.float32 and p.device.type in ("cpu", "cuda") for p in actor + critic)
+        every = actor + critic + log_std
+        fused = all(p.dtype == torch.float32 and p.device.type in ("cpu", "cuda") for p in every)
         self.optimizer = torch.optim.Adam(groups, lr=cfg.learning_rate, fused=fused or None)
 
     @property
