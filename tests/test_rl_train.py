@@ -19,6 +19,7 @@ import wristmimic
 from wristmimic.cli.main import app
 from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.rl import TrainSpec, load_policy, preset, resume_run, start_run
 from wristmimic.rl.checkpoint import load_checkpoint
@@ -198,6 +199,34 @@ def test_learning_curve_script_plots_a_run(dataset: Path, tmp_path: Path) -> Non
     script = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "learning_curve.py"))
     out = script["plot"](tmp_path / "run", tmp_path / "reports" / "curve.png", 5)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_sampling_probe_plans_from_one_broadcast_state_with_and_without_a_policy(dataset: Path, tmp_path: Path) -> None:
+    """scripts/sampling_probe.py: every world restarts from world 0's state (same actions, same results), knots
+    interpolate linearly, and the receding horizon executes contiguous frames, after ``--start`` with a policy."""
+    probe = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "sampling_probe.py"))
+    kn = torch.tensor([[[0.0], [1.0], [3.0]]])
+    assert probe["knots_to_sequence"](kn, 6, 2)[0, :, 0].tolist() == [0.0, 0.5, 1.0, 2.0, 3.0, 3.0]
+    env = WristMimicEnv.from_file(dataset, SID, num_worlds=3, nthread=1)
+    env.reset(start_frames=torch.tensor([0, 7, 13]))
+    env.step(torch.zeros(3, env.action_size))
+    env.load_state_dict(probe["broadcast"](env.state_dict(), 1, 3))
+    assert env.frame.tolist() == [8, 8, 8]
+    obs, r, term, trunc, _ = env.step(torch.full((3, env.action_size), 0.2))
+    assert not (term | trunc).any()
+    q = env.backend.qpos
+    assert torch.equal(q[0], q[1]) and torch.equal(q[0], q[2])  # the physics bit for bit
+    assert torch.allclose(obs[0], obs[2], atol=1e-6) and torch.allclose(r[0], r[1])  # float32 math per batch row
+    args = ["--scene", SID, "--worlds", "4", "--horizon", "4", "--knot", "2", "--iters", "2", "--commit", "2"]
+    a = probe["parser"]().parse_args([str(dataset), *args, "--frames", "6", "--nthread", "1"])
+    frames = [rec["frame"] for rec in probe["probe"](a, log=lambda _: None)]
+    assert frames == list(range(1, frames[-1] + 1)) and frames[-1] <= 6
+    start_run(_spec(dataset, 2), tmp_path / "run", nthread=1, progress=False)
+    a = probe["parser"]().parse_args(
+        [str(dataset), *args, "--frames", "9", "--nthread", "1", "--policy", str(tmp_path / "run"), "--start", "5"]
+    )
+    frames = [rec["frame"] for rec in probe["probe"](a, log=lambda _: None)]
+    assert frames[0] == 6 and frames == list(range(6, frames[-1] + 1))
 
 
 def test_sigma_schedule_sets_each_rollouts_sigma_and_the_policy_keeps_the_last(dataset: Path, tmp_path: Path) -> None:
