@@ -55,7 +55,10 @@ def test_smplx_scene_gains_ranges_and_collisions(synth_files: tuple[Path, Path])
     # no self-collision; humanoid meets objects and floor
     hum = [g for g in range(m.ngeom) if m.geom_bodyid[g] in sc.body_ids]
     other = [g for g in range(m.ngeom) if g not in hum and m.geom_contype[g]]
-    collide = lambda a, b: bool(m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])  # noqa: E731
+
+    def collide(a: int, b: int) -> bool:
+        return bool(m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])
+
     assert not any(collide(a, b) for a in hum for b in hum)
     assert all(collide(a, b) for a in hum[:5] for b in other)
     # dynamic object: stored mass, hull geoms, free joint

@@ -2,9 +2,9 @@
 
 The humanoid comes from the MJCF stored in the canonical file, re-actuated for MuJoCo: its joint
 ``stiffness``/``damping`` (Isaac Gym PD gains) become position actuators (kp, kv) with the paper's gains per
-body part, joint springs and damping are zeroed, armature 0.02, the MJCF's geom densities, finger ranges as InterMimic (a
-humanoid with a swapped hand, :mod:`wristmimic.humanoid.hands`, keeps the ranges its MJCF carries), and
-self-collision is off. Each dynamic object is a free body with one mesh geom per coacd hull and the stored
+body part, joint springs and damping are zeroed, armature 0.02, the MJCF's geom densities, finger ranges as
+InterMimic (a humanoid with a swapped hand, :mod:`wristmimic.humanoid.hands`, keeps the ranges its MJCF carries),
+and self-collision is off. Each dynamic object is a free body with one mesh geom per coacd hull and the stored
 mass/inertia (from the visual mesh, not the hull sum); static objects (real or inferred supports) are fixed at
 their frame-0 pose. Sensors give everything the environment observes, so a batch of worlds can be stepped by
 ``mujoco.rollout`` with no Python per world.
