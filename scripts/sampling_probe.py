@@ -140,7 +140,9 @@ def probe(args: argparse.Namespace, log: Any = print) -> list[dict[str, Any]]:
                 ret -= (alive & term).float() * args.penalty * (H - h) / H
                 alive &= ~(term | trunc)
             elite = torch.topk(ret, max(1, int(args.elite * N)))
-            w = torch.softmax((elite.values - elite.values.max()) / (args.temperature * (elite.values.std(correction=0) + 1e-6)), 0)
+            w = torch.softmax(
+                (elite.values - elite.values.max()) / (args.temperature * (elite.values.std(correction=0) + 1e-6)), 0
+            )
             nominal = (w[:, None, None] * knots[elite.indices]).sum(0)
             stats = (float(ret[0]), float(elite.values[0]), int(alive.sum()))
         env.load_state_dict(broadcast(state, 0, N))
