@@ -29,10 +29,7 @@ from wristmimic.rl.config import preset, preset_env
 from wristmimic.rl.networks import ActorCritic
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from physics_settings import raw_step_rate  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "data"
+from physics_settings import dataset_or_shared_omomo, raw_step_rate  # noqa: E402
 
 
 def _policy(env: WristMimicEnv) -> ActorCritic:
@@ -117,14 +114,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=64, help="control steps per repetition")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        path = args.dataset
-        if path is None:
-            from wristmimic.convert.common import ConvertOptions
-            from wristmimic.convert.intermimic import convert_intermimic
-
-            path = Path(tmp) / "omomo.h5"
-            opts = ConvertOptions(show_progress=False)
-            convert_intermimic(SHARED / "intermimic_omomo", path, sequences=[args.sequence], options=opts)
+        path = dataset_or_shared_omomo(args.dataset, args.sequence, tmp)
         for n in args.worlds:
             bench(path, args.sequence, n, args.iterations, args.steps)
 

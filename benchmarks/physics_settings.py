@@ -49,3 +49,18 @@ def raw_step_rate(
     rate = calls * n * substeps / (time.perf_counter() - t0)
     pool.close()
     return rate
+
+
+def dataset_or_shared_omomo(path, sequence: str, tmp: str):
+    """``path`` if given, else ``sequence`` of the shared InterMimic OMOMO copy converted into ``tmp``."""
+    from pathlib import Path
+
+    if path is not None:
+        return Path(path)
+    from wristmimic.convert.common import ConvertOptions
+    from wristmimic.convert.intermimic import convert_intermimic
+
+    out = Path(tmp) / "omomo.h5"
+    shared = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "intermimic_omomo"
+    convert_intermimic(shared, out, sequences=[sequence], options=ConvertOptions(show_progress=False))
+    return out

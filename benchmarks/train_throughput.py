@@ -27,10 +27,7 @@ from wristmimic.rl.config import preset, preset_env
 from wristmimic.rl.runner import Runner
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from physics_settings import BEFORE, NOW, Settings, raw_step_rate  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "data"
+from physics_settings import BEFORE, NOW, Settings, dataset_or_shared_omomo, raw_step_rate  # noqa: E402
 
 
 def bench(path: Path, sid: str, preset_name: str, iterations: int, num_envs: int | None, settings: Settings) -> float:
@@ -83,14 +80,7 @@ def main() -> None:
     ap.add_argument("--compare", action="store_true", help="also run the physics settings before issue #15")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        path = args.dataset
-        if path is None:
-            from wristmimic.convert.common import ConvertOptions
-            from wristmimic.convert.intermimic import convert_intermimic
-
-            path = Path(tmp) / "omomo.h5"
-            opts = ConvertOptions(show_progress=False)
-            convert_intermimic(SHARED / "intermimic_omomo", path, sequences=[args.sequence], options=opts)
+        path = dataset_or_shared_omomo(args.dataset, args.sequence, tmp)
         now = bench(path, args.sequence, args.preset, args.iterations, args.num_envs, NOW)
         if args.compare:
             before = bench(path, args.sequence, args.preset, args.iterations, args.num_envs, BEFORE)
