@@ -34,8 +34,9 @@ import torch
 
 from wristmimic.env.config import env_config_from_dict
 from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.errors import InputError
 from wristmimic.rl.config import preset_env, to_jsonable
-from wristmimic.rl.overrides import parse_override
+from wristmimic.rl.overrides import apply_overrides
 from wristmimic.safe_io import atomic_output
 
 
@@ -79,15 +80,9 @@ def build(args: argparse.Namespace) -> tuple[WristMimicEnv, Any]:
         env = make_env(policy.metadata, args.worlds, nthread=args.nthread, dataset=args.dataset)
     else:
         policy = None
-        cfg = to_jsonable(preset_env("cpu", "wristmimic"))
-        for text in args.set:
-            path, value = parse_override(text)
-            if path[0] != "env":
-                raise SystemExit(f"--set {text}: only env.FIELD overrides apply here")
-            d = cfg
-            for key in path[1:-1]:
-                d = d[key]
-            d[path[-1]] = value
+        if any(not text.startswith("env.") for text in args.set):
+            raise SystemExit("--set: only env.FIELD overrides apply here")
+        cfg = apply_overrides({"env": to_jsonable(preset_env("cpu", "wristmimic"))}, args.set)["env"]
         cfg["starts"]["bank"] = 0.0
         env = WristMimicEnv.from_file(
             args.dataset, args.scene, args.worlds, env_config_from_dict(cfg), seed=args.seed, nthread=args.nthread
@@ -200,7 +195,10 @@ def parser() -> argparse.ArgumentParser:
 
 def main() -> None:
     args = parser().parse_args()
-    records = probe(args)
+    try:
+        records = probe(args)
+    except InputError as exc:
+        raise SystemExit(f"error: {exc}") from None
     with atomic_output(args.out) as tmp:
         Path(tmp).write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "frames": records}))
     print(f"wrote {args.out}: {len(records)} frames")
