@@ -13,7 +13,7 @@ from wristmimic.rl import TrainSpec, preset, start_run
 from wristmimic.rl.config import preset_env
 from wristmimic.synth.generate import generate
 
-ITERATIONS = 16
+ITERATIONS = 32
 
 
 @pytest.fixture(scope="module")
