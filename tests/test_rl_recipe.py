@@ -13,7 +13,7 @@ from wristmimic.rl import TrainSpec, preset, start_run
 from wristmimic.rl.config import preset_env
 from wristmimic.synth.generate import generate
 
-ITERATIONS = 32
+ITERATIONS = 64
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,9 @@ asserted, 4 frames, stays far below it (it was chosen for the previous recipe, w
 against 32.9). "Not knocked away" is asserted at the paper's success threshold, 10 cm of mean object error: the seeds'
 1.1-6.3 cm are seed noise (a fresh machine of 2026-12-02 gave seed 0 4.5 cm, the same code having given 1.1 on the
 previous one: floating-point differences between machines grow over a training run), a box knocked off the
-table is tens of centimetres off.
+table is tens of centimetres off. The recipe of 2026-12-04 (32 worlds, an update every 1,024 frames) learns faster
+per frame (its three seeds passed 90 % in periodic evaluations by 205-328k frames, against never for 64 worlds on
+the same machine); its seeds at this budget were not re-measured.
 """
 
 from __future__ import annotations
