@@ -21,7 +21,7 @@ from wristmimic.env.config import EnvConfig, TerminationConfig
 from wristmimic.errors import InputError
 from wristmimic.evaluate import EvalInterrupted, evaluate_policy, load_protocol, load_split, wilson_interval
 from wristmimic.evaluate import runner as eval_runner
-from wristmimic.evaluate.metrics import TRIAL_COLUMNS, TrialSums, is_success
+from wristmimic.evaluate.metrics import TRIAL_COLUMNS, TrialSums, is_strict_success, is_success
 from wristmimic.evaluate.noise import normal, splitmix64, trial_seeds, uniform
 from wristmimic.evaluate.policy import act_rows
 from wristmimic.evaluate.trials import TrialSettings, make_env, run_trials
@@ -146,6 +146,13 @@ def test_success_needs_completion_object_error_and_contact() -> None:
     assert got == [True, False, False, False, False, True]
 
 
+def test_strict_success_also_needs_the_object_within_the_threshold_in_every_frame() -> None:
+    # a box left on the table while the reference lifts it 14 cm for a few frames: mean 2 cm, peak 14 cm
+    success = torch.tensor([True, True, True, False])
+    peak = torch.tensor([0.14, 0.0999, 0.10, 0.01], dtype=torch.float64)
+    assert is_strict_success(success, peak, 0.10).tolist() == [False, True, False, False]
+
+
 def test_trial_sums_average_errors_and_count_kept_hand_contact() -> None:
     sums = TrialSums.zeros(2)
     ref = torch.tensor([[True, False], [True, True]])
@@ -167,8 +174,9 @@ def test_trial_sums_average_errors_and_count_kept_hand_contact() -> None:
     assert m["obj_rot_err_deg"].tolist() == pytest.approx([90.0, 0.0])
     assert m["wrist_rot_err_deg"].tolist() == pytest.approx([0.0, 180.0])
     assert m["contact_ratio"].tolist() == pytest.approx([1 / 4, 3 / 4])
+    assert m["obj_pos_err_peak_cm"].tolist() == pytest.approx([10.0, 20.0])
     sums.clear(torch.tensor([0]))
-    assert sums.frames.tolist() == [0, 2]
+    assert sums.frames.tolist() == [0, 2] and sums.obj_pos_peak[0] == 0
     assert sums.means(torch.tensor([1]), ref_contact=0)["contact_ratio"].tolist() == [1.0]  # no reference contact
 
 
@@ -274,6 +282,8 @@ def test_every_trial_succeeds_without_terminations_and_lenient_thresholds(datase
     assert (lenient["frames_completed"] == T - 1).all() and (lenient["frames_total"] == T - 1).all()
     want = (strict["obj_pos_err_cm"] < 10.0) & (strict["contact_ratio"] >= 0.8)
     assert strict["success"].tolist() == want.tolist()
+    assert (lenient["obj_pos_err_peak_cm"] >= lenient["obj_pos_err_cm"]).all()
+    assert lenient["strict_success"].tolist() == (lenient["obj_pos_err_peak_cm"] < 10_000.0).tolist()
     assert ((strict["contact_ratio"] >= 0) & (strict["contact_ratio"] <= 1)).all()
 
 

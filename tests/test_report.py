@@ -4,6 +4,7 @@ byte-identical reruns, plots, summary.md, and one-line errors for inconsistent i
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,8 @@ def fake_eval(
             "wrist_pos_err_cm": 3.0,
             "wrist_rot_err_deg": 4.0,
             "contact_ratio": 0.9,
+            "obj_pos_err_peak_cm": np.where(k % 4 == 0, 12.0, 8.0),  # every 4th trial once left the 10 cm ball
+            "strict_success": (k < s) & (k % 4 != 0),
         }
     )[list(TRIAL_COLUMNS)].astype(TRIAL_COLUMNS)
     df.to_parquet(folder / f"{scene}.parquet", index=False)
@@ -84,6 +87,7 @@ def test_tables_have_the_expected_values_order_and_format(evals: Path, tmp_path:
     lo, hi = wilson_interval(19, 20)
     assert row["success_pct"] == 95.0 and row["success_ci_low_pct"] == pytest.approx(100 * lo, abs=1e-4)
     assert row["success_ci_high_pct"] == pytest.approx(100 * hi, abs=1e-4) and row["obj_pos_err_cm"] == 5.0
+    assert row["strict_pct"] == 70.0 and row["obj_pos_err_peak_cm"] == 9.0  # 19 successes, 5 of them peaked at 12
     text = (out / "per_scene.csv").read_text()
     assert "\r" not in text and "95.0000," in text and text.endswith("\n")
     ds = pd.read_csv(out / "per_dataset.csv")
@@ -102,6 +106,14 @@ def test_tables_have_the_expected_values_order_and_format(evals: Path, tmp_path:
         term["completed"] + term[["fall", "body_error", "object_error", "contact_lost", "wrist"]].sum(axis=1)
         == term["trials"]
     ).all()
+
+
+def test_tables_of_evaluations_older_than_the_strict_rule_read_with_nan_strict_rates(tmp_path: Path) -> None:
+    folder = fake_eval(tmp_path / "old", *CASES[0])
+    table = folder / f"{CASES[0][3]}.parquet"
+    pd.read_parquet(table).drop(columns=["obj_pos_err_peak_cm", "strict_success"]).to_parquet(table, index=False)
+    row = pd.read_csv(build_report([folder], tmp_path / "rep").out / "per_scene.csv").iloc[0]
+    assert row["success_pct"] == 95.0 and math.isnan(row["strict_pct"]) and math.isnan(row["obj_pos_err_peak_cm"])
 
 
 def test_ablations_use_only_the_scenes_every_method_has(evals: Path, tmp_path: Path) -> None:

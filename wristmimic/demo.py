@@ -53,6 +53,8 @@ class DemoResult:
     success_pct: float
     deployed: str = ""
     """Which weights were evaluated, e.g. "the best periodic evaluation's (iteration 100, 204,800 frames)"."""
+    strict_pct: float = float("nan")
+    """Trials that also kept the object within 10 cm of its reference in every frame (evaluate.metrics)."""
 
 
 def run_demo(
@@ -117,7 +119,10 @@ def run_demo(
     recording = out / "demo.rrd"
     record_run(run_dir, recording, RunViewOptions())
     t["view"] = time.perf_counter() - t0
-    return DemoResult(dataset, run_dir, eval_dir, report_dir, recording, t, _success_pct(res), deployed_text(policy))
+    return DemoResult(
+        dataset, run_dir, eval_dir, report_dir, recording, t, _success_pct(res), deployed_text(policy),
+        100.0 * float(res.summary["strict_success_rate"]),
+    )  # fmt: skip
 
 
 def deployed_text(policy: RunPolicy) -> str:

@@ -43,7 +43,8 @@ def demo_cmd(
     took = ", ".join(f"{k} {v:.0f} s" for k, v in r.seconds.items())
     typer.echo(
         f"\ndone ({took}); the policy succeeds in {r.success_pct:.1f} % of {cfg.trials} quick-protocol trials "
-        f"after {cfg.train_frames:,} training frames; evaluated: {r.deployed}."
+        f"after {cfg.train_frames:,} training frames (the paper's rule: mean object error under 10 cm); "
+        f"{r.strict_pct:.1f} % keep the object within 10 cm of its reference in every frame; evaluated: {r.deployed}."
     )
     typer.echo(f"  dataset     {r.dataset}   (wristmimic inspect {r.dataset})")
     typer.echo(

@@ -82,5 +82,6 @@ def evaluate_cmd(
         typer.echo(
             f"{s['scene']} [{s['method']}]: success {100 * s['success_rate']:.1f} % "
             f"(95 % CI {100 * s['success_ci_low']:.1f}-{100 * s['success_ci_high']:.1f}) of {s['trials']:,} trials, "
-            f"object {s['obj_pos_err_cm']:.1f} cm / {s['obj_rot_err_deg']:.1f} deg -> {r.out}"
+            f"object {s['obj_pos_err_cm']:.1f} cm / {s['obj_rot_err_deg']:.1f} deg; strict (object never "
+            f"{100 * proto.max_object_position_error_m:g} cm off) {100 * s['strict_success_rate']:.1f} % -> {r.out}"
         )

@@ -1,6 +1,7 @@
 """Per-trial metrics, the success rule and the Wilson score interval.
 
-A trial's errors are means over the frames it completed (frames 1..n after its start at frame 0). Its contact
+A trial's errors are means over the frames it completed (frames 1..n after its start at frame 0); its peak object
+position error is the largest over those frames. Its contact
 ratio counts hand-frames: (frames where a reference hand touches the object and the simulated hand does too) /
 (frames where the reference hand touches it over the whole sequence), so a trial that ends early keeps only
 what it held. A sequence whose reference hands never touch the object has ratio 1.
@@ -28,6 +29,8 @@ TRIAL_COLUMNS: dict[str, str] = {
     "wrist_pos_err_cm": "float64",
     "wrist_rot_err_deg": "float64",
     "contact_ratio": "float64",
+    "obj_pos_err_peak_cm": "float64",
+    "strict_success": "bool",
 }
 """Columns of the per-trial table, in order, with their pandas dtypes."""
 
@@ -57,6 +60,13 @@ def is_success(
     return ~terminated & completed & (obj_pos_err_m < max_obj_pos_err_m) & (contact_ratio >= min_contact_ratio)
 
 
+def is_strict_success(
+    success: torch.Tensor, obj_pos_err_peak_m: torch.Tensor, max_obj_pos_err_m: float
+) -> torch.Tensor:
+    """The paper's success and the object within the threshold of its reference in every completed frame."""
+    return success & (obj_pos_err_peak_m < max_obj_pos_err_m)
+
+
 @dataclass
 class TrialSums:
     """Running per-world sums over the current trial's frames (N worlds)."""
@@ -67,12 +77,13 @@ class TrialSums:
     wrist_pos: torch.Tensor  # (N,) float64, m
     wrist_rot: torch.Tensor  # (N,) float64, rad
     contact_kept: torch.Tensor  # (N,) long hand-frames
+    obj_pos_peak: torch.Tensor  # (N,) float64, m: the largest object position error so far
 
     @classmethod
     def zeros(cls, n: int) -> TrialSums:
         f = torch.zeros(n, dtype=torch.float64)
         i = torch.zeros(n, dtype=torch.long)
-        return cls(i.clone(), f.clone(), f.clone(), f.clone(), f.clone(), i.clone())
+        return cls(i.clone(), f.clone(), f.clone(), f.clone(), f.clone(), i.clone(), f.clone())
 
     def add(self, e: dict[str, torch.Tensor]) -> None:
         """Fold one step of ``info["eval"]`` (WristMimicEnv) into the sums."""
@@ -82,6 +93,7 @@ class TrialSums:
         self.wrist_pos += e["wrist_pos"].to(torch.float64)
         self.wrist_rot += e["wrist_rot"].to(torch.float64)
         self.contact_kept += (e["ref_hand"] & e["sim_hand"]).sum(-1)
+        torch.maximum(self.obj_pos_peak, e["obj_pos"].to(torch.float64), out=self.obj_pos_peak)
 
     def clear(self, ids: torch.Tensor) -> None:
         for v in self.__dict__.values():
@@ -102,4 +114,5 @@ class TrialSums:
             "wrist_pos_err_cm": 100.0 * self.wrist_pos[ids] / n,
             "wrist_rot_err_deg": deg * self.wrist_rot[ids] / n,
             "contact_ratio": ratio,
+            "obj_pos_err_peak_cm": 100.0 * self.obj_pos_peak[ids],
         }

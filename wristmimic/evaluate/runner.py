@@ -59,6 +59,7 @@ SUMMARY_COLUMNS = [
     "success_rate", "success_ci_low", "success_ci_high", "obj_pos_err_cm", "obj_rot_err_deg", "wrist_pos_err_cm",
     "wrist_rot_err_deg", "contact_ratio", "completion_rate", "frames_completed_mean", "frames_total",
     *(f"terminated_{n}" for n in TERMINATION_NAMES),
+    "strict_successes", "strict_success_rate", "strict_success_ci_low", "strict_success_ci_high", "obj_pos_err_peak_cm",
 ]  # fmt: skip
 """Columns of ``summary.csv`` in order."""
 
@@ -286,6 +287,11 @@ def summarize(df: pd.DataFrame, info: dict[str, Any]) -> dict[str, Any]:
     counts = df["termination_reason"].value_counts()
     for name in TERMINATION_NAMES:
         row[f"terminated_{name}"] = int(counts.get(name, 0))
+    ss = int(df["strict_success"].sum())
+    lo, hi = wilson_interval(ss, n)
+    row |= {"strict_successes": ss, "strict_success_rate": ss / n if n else math.nan}
+    row |= {"strict_success_ci_low": lo, "strict_success_ci_high": hi}
+    row["obj_pos_err_peak_cm"] = float(df["obj_pos_err_peak_cm"].mean()) if n else math.nan
     return row
 
 

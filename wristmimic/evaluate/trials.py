@@ -21,7 +21,7 @@ import torch
 
 from wristmimic.env.config import EnvConfig, env_config_from_dict
 from wristmimic.env.vec_env import WristMimicEnv
-from wristmimic.evaluate.metrics import TrialSums, is_success
+from wristmimic.evaluate.metrics import TrialSums, is_strict_success, is_success
 from wristmimic.evaluate.noise import normal, trial_seeds
 from wristmimic.evaluate.policy import EvalPolicy, act_rows
 from wristmimic.evaluate.protocol import InitialStateNoise, Protocol
@@ -202,6 +202,7 @@ def _run(
             settings.max_obj_pos_err_m,
             settings.min_contact_ratio,
         )
+        strict = is_strict_success(success, m["obj_pos_err_peak_cm"] / 100.0, settings.max_obj_pos_err_m)
         reasons = info["termination_reason"].cpu()[ids].tolist()
         n_frames = sums.frames[ids]
         frames += int(n_frames.sum())
@@ -214,6 +215,7 @@ def _run(
             "frames_completed": n_frames.numpy().copy(),
             "frames_total": np.full(len(ids), T - 1, dtype=np.int64),
             **{k: v.numpy() for k, v in m.items()},
+            "strict_success": strict.numpy(),
         }
         if recorder is not None:
             recorder.end(ids, rec)

@@ -26,17 +26,25 @@ FLOAT_FORMAT = "%.4f"
 LABEL_COLUMNS = ["dataset_label", "dataset", "split", "method", "variant", "protocol", "hand"]
 ERROR_COLUMNS = ["obj_pos_err_cm", "obj_rot_err_deg", "wrist_pos_err_cm", "wrist_rot_err_deg", "contact_ratio"]
 RATE_COLUMNS = ["trials", "successes", "success_pct", "success_ci_low_pct", "success_ci_high_pct"]
+STRICT_COLUMNS = ["strict_pct", "strict_ci_low_pct", "strict_ci_high_pct", "obj_pos_err_peak_cm"]
+"""Success with the object never beyond the threshold in any frame (:mod:`wristmimic.evaluate.metrics`); NaN for
+trial tables written before it existed."""
+LATER_TRIAL_COLUMNS = {"obj_pos_err_peak_cm": math.nan, "strict_success": False}
+"""Trial columns added after the first table format, and their fill for older tables (whose strict rates are NaN)."""
 PER_SCENE_COLUMNS = [
     "dataset_label",
     "method",
     "scene",
     *RATE_COLUMNS,
     *ERROR_COLUMNS,
+    *STRICT_COLUMNS,
     "completion_pct",
     "frames_completed_mean",
     "frames_total",
 ]
-PER_DATASET_COLUMNS = ["dataset_label", "method", "scenes", *RATE_COLUMNS, *ERROR_COLUMNS, "completion_pct"]
+PER_DATASET_COLUMNS = [
+    "dataset_label", "method", "scenes", *RATE_COLUMNS, *ERROR_COLUMNS, *STRICT_COLUMNS, "completion_pct"
+]  # fmt: skip
 ABLATION_COLUMNS = ["method", "variant", "scenes", *RATE_COLUMNS, "obj_pos_err_cm", "obj_rot_err_deg"]
 HAND_COLUMNS = ["hand", "method", "dataset_label", "scenes", *RATE_COLUMNS, "obj_pos_err_cm", "obj_rot_err_deg", "cell"]
 SOURCE_HAND = "(source hand)"
@@ -133,6 +141,9 @@ def read_trials(path: Path) -> pd.DataFrame:
         raise InputError(
             path, "<file>", f"not a readable parquet file ({reason})", "the trial table `wristmimic evaluate` wrote"
         ) from None
+    for col, fill in LATER_TRIAL_COLUMNS.items():
+        if col not in df.columns:
+            df[col] = fill
     missing = [c for c in TRIAL_COLUMNS if c not in df.columns]
     if missing:
         raise InputError(path, missing[0], "column missing", "a wristmimic trial table")
@@ -231,6 +242,11 @@ def _rates(g: pd.DataFrame) -> dict[str, Any]:
         "success_ci_high_pct": 100.0 * hi,
     }
     out |= {c: float(g[c].mean()) if n else math.nan for c in ERROR_COLUMNS}
+    judged = g[g["obj_pos_err_peak_cm"].notna()]  # older tables have no peak error: NaN, not 0 %
+    m, k = len(judged), int(judged["strict_success"].sum())
+    lo, hi = wilson_interval(k, m)
+    out |= {"strict_pct": 100.0 * k / m if m else math.nan, "strict_ci_low_pct": 100.0 * lo}
+    out |= {"strict_ci_high_pct": 100.0 * hi, "obj_pos_err_peak_cm": float(judged["obj_pos_err_peak_cm"].mean())}
     out["completion_pct"] = 100.0 * float((~g["terminated"]).mean()) if n else math.nan
     return out
 

@@ -373,7 +373,8 @@ class Runner:
     def periodic_eval(self) -> dict[str, float]:
         """``eval_trials`` frame-0 trials of the quick protocol with the current policy, exactly as
         ``wristmimic evaluate`` runs them (seeded action noise, the run's terminations, no object controller):
-        ``eval/success_rate``, ``eval/frames_completed`` (mean), ``eval/obj_pos_err_cm``, ``eval/contact_ratio``."""
+        ``eval/success_rate``, ``eval/frames_completed`` (mean), ``eval/obj_pos_err_cm``, ``eval/contact_ratio``,
+        ``eval/strict_success_rate`` (see :mod:`wristmimic.evaluate.metrics`)."""
         from wristmimic.evaluate.policy import RunPolicy
         from wristmimic.evaluate.protocol import load_protocol
         from wristmimic.evaluate.trials import TrialSettings, make_env, run_trials
@@ -409,10 +410,11 @@ class Runner:
         run_trials(self._eval_env, RunPolicy(current, {}), settings, 0, self.cfg.eval_trials, records.append)
         col = {
             k: np.concatenate([r[k] for r in records])
-            for k in ("success", "frames_completed", "obj_pos_err_cm", "contact_ratio")
+            for k in ("success", "strict_success", "frames_completed", "obj_pos_err_cm", "contact_ratio")
         }
         return {
             "eval/success_rate": float(col["success"].mean()),
+            "eval/strict_success_rate": float(col["strict_success"].mean()),
             "eval/frames_completed": float(col["frames_completed"].mean()),
             "eval/obj_pos_err_cm": float(np.nanmean(col["obj_pos_err_cm"])),
             "eval/contact_ratio": float(np.nanmean(col["contact_ratio"])),
@@ -576,7 +578,13 @@ def _restoring(path: Path, key: str, expected: str) -> Iterator[None]:
         raise InputError(path, key, f"does not fit this run ({detail[:200]})", expected) from None
 
 
-EVAL_COLUMNS = ("eval/success_rate", "eval/frames_completed", "eval/obj_pos_err_cm", "eval/contact_ratio")
+EVAL_COLUMNS = (
+    "eval/success_rate",
+    "eval/frames_completed",
+    "eval/obj_pos_err_cm",
+    "eval/contact_ratio",
+    "eval/strict_success_rate",
+)
 """Columns of the periodic evaluation in ``metrics.csv`` (NaN in iterations without one)."""
 
 
