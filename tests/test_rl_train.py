@@ -283,19 +283,23 @@ def test_deployed_average_follows_the_warm_up_decay() -> None:
 def test_deployed_best_is_the_best_periodic_evaluation_and_resumes(
     dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    rates = {1: 0.5, 2: 1.0, 3: 0.25}  # scripted evaluations: iteration 2 is the best
+    # scripted (paper, strict) rates: iteration 2 is the best, by its strict rate (the paper's alone: iteration 3)
+    rates = {1: (1.0, 0.0), 2: (0.5, 0.5), 3: (1.0, 0.25)}
     seeds: list[int] = []
 
     def fake_eval(self: Runner) -> dict[str, float]:
         seeds.append(self.cfg.eval_base_seed)
-        return {"eval/success_rate": rates[self.iteration]}
+        paper, strict = rates[self.iteration]
+        return {"eval/success_rate": paper, "eval/strict_success_rate": strict}
 
     monkeypatch.setattr(Runner, "periodic_eval", fake_eval)
     kw = dict(deploy_best=True, eval_every=1, eval_base_seed=12345)
     start_run(_spec(dataset, 3, **kw), tmp_path / "run", nthread=1, progress=False)
     assert seeds == [12345] * 3
     state = load_checkpoint(tmp_path / "run")
-    assert state["deploy"] == {"weights": "best", "iteration": 2, "frames": 64, "eval_success_rate": 1.0}
+    assert state["deploy"] == {
+        "weights": "best", "iteration": 2, "frames": 64, "eval_success_rate": 0.5, "eval_strict_success_rate": 0.5
+    }  # fmt: skip
     start_run(_spec(dataset, 2), tmp_path / "two", nthread=1, progress=False)  # the same training, stopped at 2
     assert _same_params(state["deploy_policy"], _params(tmp_path / "two"))
     assert not _same_params(state["policy"], _params(tmp_path / "two"))  # training went on to iteration 3

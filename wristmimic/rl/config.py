@@ -106,8 +106,8 @@ class PPOConfig:
     to the next (0, 81, 0, 6, 100, 0, 53 %) while the reward rose steadily. Measured on ``synth_high_table`` (seed 0, 256 quick trials): decay 0.95 deployed 72.7 % at
     iteration 100 and 3.5 % at 160, against 100 % and 0 % for the latest weights: it does not remove the swings."""
     deploy_best: bool = False
-    """Deploy the policy of the periodic evaluation (``eval_every``) with the highest ``eval/success_rate`` (ties:
-    the later one; the latest or averaged weights until the first evaluation, and always with ``eval_every`` 0)
+    """Deploy the policy of the periodic evaluation (``eval_every``) with the highest ``eval/strict_success_rate``
+    and, among those, the highest ``eval/success_rate`` (ties: the later one; the latest or averaged weights until the first evaluation, and always with ``eval_every`` 0)
     instead of the last update's: model selection on a validation set of trials (``eval_base_seed``). Saved as ``deploy_policy`` with its
     iteration, frames and success rate (``deploy`` in the checkpoint); evaluation, ``view`` and ``export`` load
     it, resumed training goes on from the latest weights."""

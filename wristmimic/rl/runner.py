@@ -222,12 +222,21 @@ class Runner:
         return self.policy if self.ema_net is None else self.ema_net
 
     def _keep_best(self, evaluation: dict[str, float]) -> None:
-        """``cfg.deploy_best``: keep the evaluated candidate if it succeeds at least as often as the best so far."""
+        """``cfg.deploy_best``: keep the evaluated candidate if it ranks at least as high as the best so far, by
+        strict success rate first (the object kept within 10 cm of its reference in every frame), then by the
+        paper's success rate."""
         rate = evaluation.get("eval/success_rate")
-        if not self.cfg.deploy_best or rate is None or (self.best and rate < self.best["eval_success_rate"]):
+        strict = evaluation.get("eval/strict_success_rate", 0.0)
+        if not self.cfg.deploy_best or rate is None:
+            return
+        if self.best and (strict, rate) < (
+            self.best.get("eval_strict_success_rate", 0.0),
+            self.best["eval_success_rate"],
+        ):
             return
         weights = {k: v.detach().clone() for k, v in self.candidate.state_dict().items()}
         self.best = {"policy": weights, "iteration": self.iteration, "frames": self.frames, "eval_success_rate": rate}
+        self.best["eval_strict_success_rate"] = strict
 
     def deployment(self) -> tuple[dict[str, torch.Tensor] | None, dict[str, Any]]:
         """The weights evaluation, ``view`` and ``export`` load (None: the latest) and what they are: ``weights``
@@ -468,6 +477,7 @@ class Runner:
         deploy = state.get("deploy") or {}
         if self.cfg.deploy_best and deploy.get("weights") == "best":
             self.best = {k: deploy[k] for k in ("iteration", "frames", "eval_success_rate")}
+            self.best["eval_strict_success_rate"] = deploy.get("eval_strict_success_rate", 0.0)  # older: none kept
             self.best["policy"] = {k: v.clone() for k, v in state["deploy_policy"].items()}
         with _restoring(path, "optimizer", "the Adam state of the network in the checkpoint's config"):
             self.alg.optimizer.load_state_dict(state["optimizer"])
