@@ -5,7 +5,8 @@ Usage:  python scripts/learning_curve.py RUN_DIR -o reports/learning_curve_<scen
 Panels: mean episode length, mean per-step reward and success rate against environment frames; faint lines are
 per-iteration values, bold lines a moving average. The success panel shows the training success rate (episodes
 that started at frame 0 and reached the last frame) and, as points, the periodic evaluation's
-``eval/success_rate`` (frame-0 trials of the quick protocol, as ``wristmimic evaluate`` runs them).
+``eval/success_rate`` (frame-0 trials of the quick protocol, as ``wristmimic evaluate`` runs them) and, where logged,
+``eval/strict_success_rate`` (the object within 10 cm of its reference in every frame).
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ def plot(run_dir: Path, out: Path, smooth: int) -> Path:
         if col == "success_rate" and "eval/success_rate" in m:
             ev = m[m["eval/success_rate"].notna()]
             ax.plot(ev["frames"], ev["eval/success_rate"], "o-", ms=4, label="evaluation (frame-0 trials)")
+            if "eval/strict_success_rate" in m and ev["eval/strict_success_rate"].notna().any():
+                ax.plot(ev["frames"], ev["eval/strict_success_rate"], "s--", ms=3, label="strict (object within 10 cm)")
             ax.legend(loc="upper left", fontsize=8)
         ax.set_xlabel("environment frames")
         ax.xaxis.set_major_formatter(EngFormatter(sep=""))  # 200k, 1M: no overlapping tick labels

@@ -40,7 +40,10 @@ def test_presets_set_their_environment() -> None:
     assert paper.action_mode == "absolute" and not paper.object_controller.enabled and not paper.starts.adaptive
     assert cpu.action_mode == "residual" and cpu.object_controller.enabled and cpu.starts.adaptive
     assert preset_env("cpu", "intermimic").finger_targets  # the variant's flags stay
-    # the recipe weighs the object's rotation 10x the paper (a tipped box must cost reward)
+    # the recipe weighs the object's rotation 10x the paper and its position 60x, and ends an episode when the
+    # object is 10 cm off (a box left on the table or tipped must cost reward and the episode)
     assert paper.weights.orot == pytest.approx(0.1) and cpu.weights.orot == pytest.approx(1.0)
-    assert cpu.weights.op == paper.weights.op  # other weights stay the paper's
+    assert paper.weights.op == pytest.approx(5.0) and cpu.weights.op == pytest.approx(300.0)
+    assert paper.termination.object_error == 0.5 and cpu.termination.object_error == pytest.approx(0.1)
+    assert cpu.weights.ig == paper.weights.ig and cpu.termination.body_error == paper.termination.body_error
     assert preset("paper").schedule == "fixed" and not preset("paper").learn_std
