@@ -162,16 +162,18 @@ seen = collections.Counter()
 for k in range(40):
     out = folder / f"o{k}.h5"
     timer = threading.Timer(one * (k + 0.5) / 40, os.kill, (os.getpid(), signal.SIGINT))
+    finished = False
     try:
         with writer(out) as w:
             timer.start()
             w.add_humanoid("h", human)
             w.add_humanoid("h2", human)
+        finished = True  # a loaded machine can finish the writes before the timer fires
         timer.join()
         time.sleep(0.05)
     except KeyboardInterrupt:
-        seen["interrupted"] += 1
-        assert not out.exists(), out
+        seen["late" if finished else "interrupted"] += 1
+        assert finished or not out.exists(), out
     except BaseException as exc:
         seen[type(exc).__name__] += 1
     left = sorted(p.name for p in folder.iterdir() if p.name != out.name)
@@ -185,7 +187,9 @@ def test_ctrl_c_in_the_middle_of_an_hdf5_string_write_is_a_clean_interrupt(tmp_p
     """h5py converts variable-length strings in a Python callback. A KeyboardInterrupt raised inside it broke
     HDF5's state: ``TypeError: Operation not defined for data type class`` or a segfault on close (seen in
     ``convert`` under Ctrl-C). SIGINT is sent at 40 moments of such writes, in a subprocess: each one must end as
-    a plain KeyboardInterrupt with no file left behind."""
+    a plain KeyboardInterrupt with no file left behind (one that a loaded machine delivers after the writes have
+    finished leaves the finished file; at least 30 of the 40 must land inside the writes)."""
+    import ast
     import subprocess
     import sys
 
@@ -193,7 +197,10 @@ def test_ctrl_c_in_the_middle_of_an_hdf5_string_write_is_a_clean_interrupt(tmp_p
         [sys.executable, "-c", _CTRL_C_SCRIPT, str(tmp_path)], capture_output=True, text=True, timeout=300
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    assert r.stdout.strip() == "{'interrupted': 40}", r.stdout + r.stderr[-2000:]
+    seen = ast.literal_eval(r.stdout.strip())
+    # every SIGINT ends as a KeyboardInterrupt; most land inside the writes (on a loaded machine a few come after
+    # them, when the written file rightly stays)
+    assert set(seen) <= {"interrupted", "late"} and seen.get("interrupted", 0) >= 30, r.stdout + r.stderr[-2000:]
 
 
 def test_ctrl_c_right_after_the_temporary_file_is_made_leaves_nothing(
