@@ -47,3 +47,5 @@ def test_presets_set_their_environment() -> None:
     assert paper.termination.object_error == 0.5 and cpu.termination.object_error == pytest.approx(0.1)
     assert cpu.weights.ig == paper.weights.ig and cpu.termination.body_error == paper.termination.body_error
     assert preset("paper").schedule == "fixed" and not preset("paper").learn_std
+    # the recipe explores with temporally correlated noise (AR(1), rho 0.9); the paper with white noise
+    assert preset("cpu").noise_correlation == pytest.approx(0.9) and preset("paper").noise_correlation == 0.0
