@@ -1,13 +1,15 @@
 """Ablation of the CPU training recipe: one row per lever, every row at the same frame budget and seed.
 
-Usage:  python scripts/ablation.py DATASET.h5 --scene synth_default --frames 300000 -o reports/ablation_synth_default
-        [--rows recipe,latest_weights,absolute,fixed_ppo,no_curriculum,uniform_starts,training_sigma,sigma_anneal]
+Usage:  python scripts/ablation.py DATASET.h5 --scene synth_default --frames 400000 -o reports/ablation_synth_default
+        [--rows recipe,white_noise,latest_weights,absolute,fixed_ppo,no_curriculum,uniform_starts,training_sigma,
+        sigma_anneal]
         [--trials 256]
         [--seed 0]
 
 Each row trains with ``wristmimic.rl.start_run`` (the ``cpu`` preset with one lever changed) and is evaluated
 under the quick protocol with ``--trials`` frame-0 trials, as ``wristmimic evaluate`` does. Writes
-``OUT/ablation.csv`` (success %, Wilson 95 % interval, frames completed, errors, termination counts, training
+``OUT/ablation.csv`` (success % by the strict and the paper's rule, Wilson 95 % intervals, median approx KL and
+clip fraction, the periodic evaluations, frames completed, errors, termination counts, training
 seconds) and ``OUT/ablation.md``, and keeps each row's ``config.json``, ``metrics.csv`` and evaluation
 ``summary.json`` under ``OUT/<row>/`` (checkpoints stay in ``--work``). A row already evaluated in ``--work`` is
 not run again.
@@ -47,6 +49,11 @@ ROWS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
         "uniform start frames (no failure weighting)",
         {"starts": StartSamplingConfig(adaptive=False)},
         {},
+    ),
+    "white_noise": (
+        "white exploration noise (no AR(1) temporal correlation)",
+        {},
+        {"noise_correlation": 0.0},
     ),
     "latest_weights": ("the recipe's run, deploying its last update instead of the best periodic evaluation", {}, {}),
     "training_sigma": ("the recipe's run, deployed with the training sigma (~0.1) instead of 0.003", {}, {}),
@@ -96,13 +103,27 @@ def run_row(name: str, dataset: Path, scene: str, frames: int, seed: int, trials
         "success_pct": round(100 * float(s["success_rate"]), 1),
         "ci95_low_pct": round(100 * lo, 1),
         "ci95_high_pct": round(100 * hi, 1),
+        "strict_success_pct": round(100 * float(s["strict_success_rate"]), 1),
+        "strict_ci95_low_pct": round(100 * float(s["strict_success_ci_low"]), 1),
+        "strict_ci95_high_pct": round(100 * float(s["strict_success_ci_high"]), 1),
         "frames_completed_mean": round(float(s["frames_completed_mean"]), 1),
         "frames_total": int(s["frames_total"]),
         "contact_ratio": round(float(s["contact_ratio"]), 3),
         "obj_pos_err_cm": round(float(s["obj_pos_err_cm"]), 2),
         "wrist_pos_err_cm": round(float(s["wrist_pos_err_cm"]), 2),
         **{k: int(v) for k, v in s.items() if k.startswith("terminated_")},
+        **_training_signals(m),
         "seconds_wall": round(time.perf_counter() - t0, 1),
+    }
+
+
+def _training_signals(m: pd.DataFrame) -> dict[str, Any]:
+    """Median approx KL and clip fraction over the run's updates, and its periodic frame-0 evaluations (%)."""
+    periodic = m["eval/success_rate"].dropna() if "eval/success_rate" in m else pd.Series(dtype=float)
+    return {
+        "median_approx_kl": round(float(m["loss/approx_kl"].median()), 4),
+        "median_clip_fraction": round(float(m["loss/clip_fraction"].median()), 3),
+        "periodic_success_pct": " ".join(f"{100 * v:.0f}" for v in periodic),
     }
 
 
@@ -110,7 +131,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dataset", type=Path)
     ap.add_argument("--scene", default="synth_default")
-    ap.add_argument("--frames", type=int, default=300_000)
+    ap.add_argument("--frames", type=int, default=400_000)
     ap.add_argument("--trials", type=int, default=256)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rows", default=",".join(ROWS))
@@ -136,7 +157,8 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     with atomic_output(args.out / "ablation.csv") as tmp:
         df.to_csv(tmp, index=False)
-    cols = ["row", "change", "success_pct", "ci95_low_pct", "ci95_high_pct", "frames_completed_mean", "train_s"]
+    cols = ["row", "change", "strict_success_pct", "strict_ci95_low_pct", "strict_ci95_high_pct", "success_pct"]
+    cols += ["frames_completed_mean", "median_approx_kl", "median_clip_fraction", "train_s"]
     md = (
         f"# Ablation on {args.scene}: {args.frames:,} frames, seed {args.seed}, {args.trials} quick-protocol trials\n\n"
     )

@@ -3,6 +3,7 @@ real run (the issue's bound: median approx KL <= 0.03 and median clip fraction <
 
 from __future__ import annotations
 
+import runpy
 from dataclasses import replace
 from pathlib import Path
 
@@ -49,3 +50,29 @@ def test_presets_set_their_environment() -> None:
     assert preset("paper").schedule == "fixed" and not preset("paper").learn_std
     # the recipe explores with temporally correlated noise (AR(1), rho 0.9); the paper with white noise
     assert preset("cpu").noise_correlation == pytest.approx(0.9) and preset("paper").noise_correlation == 0.0
+
+
+def test_ablation_rows_each_change_one_lever_of_the_recipe() -> None:
+    """scripts/ablation.py: every training row builds valid configs that differ from the recipe's in the fields it
+    names and nowhere else; eval-only rows name a training row; the training signals are read from metrics.csv."""
+    abl = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "ablation.py"))
+    env0, ppo0 = preset_env("cpu", "wristmimic"), preset("cpu")
+    for name, (_, env_kw, ppo_kw) in abl["ROWS"].items():
+        env, ppo = replace(env0, **env_kw), replace(ppo0, **ppo_kw)
+        changed = {f for f in env_kw if getattr(env, f) != getattr(env0, f)}
+        changed |= {f for f in ppo_kw if getattr(ppo, f) != getattr(ppo0, f)}
+        assert changed == set(env_kw) | set(ppo_kw), name  # a row whose value equals the recipe's ablates nothing
+        assert (name in abl["EVAL_ONLY"] or name == "recipe") == (not changed), name
+    assert {src for src, _, _ in abl["EVAL_ONLY"].values()} <= set(abl["ROWS"])
+    m = pd.DataFrame(
+        {
+            "loss/approx_kl": [0.01, 0.02, 5.0],
+            "loss/clip_fraction": [0.1, 0.2, 0.9],
+            "eval/success_rate": [None, 0.5, 1.0],
+        }
+    )
+    assert abl["_training_signals"](m) == {
+        "median_approx_kl": 0.02,
+        "median_clip_fraction": 0.2,
+        "periodic_success_pct": "50 100",
+    }
