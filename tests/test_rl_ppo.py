@@ -220,6 +220,37 @@ def test_log_std_rate_of_its_own_moves_sigma_at_that_rate_outside_the_schedule()
         PPOConfig(learn_std=True, log_std_learning_rate=0.0)
 
 
+def test_critic_rate_of_its_own_stays_fixed_while_the_schedule_moves_the_actor() -> None:
+    """With ``critic_learning_rate`` the critic is an Adam group of its own: the adaptive schedule moves only the
+    actor's rate, and each critic weight moves about the critic's rate per optimiser step (Adam)."""
+    torch.manual_seed(0)
+    net = ActorCritic(4, 2, (32,), (32,), log_std=-1.0)
+    cfg = PPOConfig(
+        num_envs=8,
+        horizon=4,
+        minibatch_size=8,
+        epochs=2,
+        schedule="adaptive",
+        learning_rate=1e-5,
+        lr_min=1e-6,
+        critic_learning_rate=1e-2,
+    )
+    alg = PPO(net, cfg)
+    before = [p.detach().clone() for p in net.critic.parameters()]
+    st = _filled_storage(net)
+    alg.compute_returns(st, torch.zeros(8))
+    alg.update(st, torch.Generator().manual_seed(0))
+    actor_group, critic_group = alg.optimizer.param_groups
+    assert critic_group["lr"] == 1e-2 and alg.learning_rate != 1e-2
+    assert all(any(p is q for q in critic_group["params"]) for p in net.critic.parameters())
+    moved = max(float((p.detach() - b).abs().max()) for p, b in zip(net.critic.parameters(), before, strict=True))
+    steps = 2 * 4  # epochs x minibatches
+    assert 0.5e-2 < moved <= steps * 1e-2 * 1.01  # far beyond what the actor's ~1e-5 could move it
+    for bad in (0.0, -1e-4, math.inf):
+        with pytest.raises(InputError, match="critic_learning_rate"):
+            PPOConfig(critic_learning_rate=bad)
+
+
 def test_learned_sigma_is_a_parameter_with_a_floor_and_old_checkpoints_load() -> None:
     net = ActorCritic(6, 3, (16,), (16,), log_std=-1.0, learn_std=True, min_log_std=-2.0)
     assert "log_std_param" in dict(net.named_parameters())
