@@ -162,12 +162,13 @@ def test_resume_refuses_a_changed_dataset(dataset: Path, tmp_path: Path) -> None
 
 def test_train_command_writes_a_run_and_resumes(dataset: Path, tmp_path: Path) -> None:
     cli = CliRunner()
-    args = ["train", str(dataset), "--scene", SID, "--num-envs", "2", "--max-frames", "64", "-q"]
+    one = 2 * preset("cpu").horizon  # frames of one iteration with 2 worlds
+    args = ["train", str(dataset), "--scene", SID, "--num-envs", "2", "--max-frames", str(one), "-q"]
     r = cli.invoke(app, [*args, "--out", str(tmp_path), "--seed", "3", "--nthread", "1"])
     assert r.exit_code == 0, r.output
     (run,) = tmp_path.iterdir()
     assert run.name.startswith(f"{SID}-wristmimic-seed3-") and "finished at iteration 1" in r.output
-    r = cli.invoke(app, ["train", "--resume", str(run), "--max-frames", "128", "-q"])
+    r = cli.invoke(app, ["train", "--resume", str(run), "--max-frames", str(2 * one), "-q"])
     assert r.exit_code == 0 and "finished at iteration 2" in r.output, r.output
     r = cli.invoke(
         app,
@@ -179,7 +180,7 @@ def test_train_command_writes_a_run_and_resumes(dataset: Path, tmp_path: Path) -
             "--num-envs",
             "2",
             "--max-frames",
-            "64",
+            str(one),
             "-q",
             "--out",
             str(tmp_path / "all"),
