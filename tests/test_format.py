@@ -198,9 +198,9 @@ def test_ctrl_c_in_the_middle_of_an_hdf5_string_write_is_a_clean_interrupt(tmp_p
     )
     assert r.returncode == 0, r.stderr[-2000:]
     seen = ast.literal_eval(r.stdout.strip())
-    # every SIGINT ends as a KeyboardInterrupt; most land inside the writes (on a loaded machine a few come after
-    # them, when the written file rightly stays)
-    assert set(seen) <= {"interrupted", "late"} and seen.get("interrupted", 0) >= 30, r.stdout + r.stderr[-2000:]
+    # every SIGINT ends as a KeyboardInterrupt; most land inside the writes (on a loaded machine some come after
+    # them, when the written file rightly stays: 13 of 40 at nice 19 beside a 2-thread training run, 2026-12-04)
+    assert set(seen) <= {"interrupted", "late"} and seen.get("interrupted", 0) >= 20, r.stdout + r.stderr[-2000:]
 
 
 def test_ctrl_c_right_after_the_temporary_file_is_made_leaves_nothing(
