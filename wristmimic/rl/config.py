@@ -249,9 +249,11 @@ PRESETS: dict[str, PPOConfig] = {
     # still every 20,480 frames): the adaptive schedule holds the actor at its floor of 1e-5 from the third update on
     # (approx KL ~0.02 there), so the policy moves by about as much per update whatever the rollout's length, and
     # twice the updates per frame learn about twice as fast within the same trust region. At 400k frames (256 quick
-    # trials, strict rule) with 32 steps: synth_default seed 0 93.8 %, synth_small_box seeds 0/1/2 54.7/0/93.8 %;
-    # with 16 steps: synth_default seed 0 100 % (first >= 90 % periodic evaluation at 163k frames instead of 266k),
-    # synth_small_box seed 1 100 %; median approx KL 0.026, clip fraction 0.21-0.22; reports/recipe_levers_20261204/.
+    # trials, strict rule) with 32 steps: synth_default seeds 0/1/2 93.8/100/98.4 %, synth_small_box 54.7/0/93.8 %,
+    # synth_turn seed 0 100 %, synth_high_table seed 0 100 %; with 16 steps: synth_default 100/100/100 % (seed 0's
+    # first >= 90 % periodic evaluation at 163k frames instead of 266k), synth_small_box 100/100/100 %, but
+    # synth_turn seed 0 0 % (the lift found at 327k, the turn not learned by 400k) and synth_high_table seed 0
+    # 95.3 %; median approx KL 0.025-0.027, clip fraction 0.19-0.23; reports/recipe_levers_20261204/.
     "cpu": PPOConfig(
         num_envs=32,
         horizon=16,
