@@ -68,3 +68,6 @@ def test_legacy_runs_have_no_state_bank_and_bad_values_are_refused() -> None:
     for bad in (dict(bank=1.5), dict(bank=-0.1), dict(bank_size=0)):
         with pytest.raises(ValueError, match="bank"):
             check_env_config(replace(EnvConfig(), starts=replace(EnvConfig().starts, **bad)))
+    assert not env_config_from_dict({"starts": {"adaptive": True}}).starts.depenetrate  # runs before it: off
+    with pytest.raises(ValueError, match="depenetrate_tol"):
+        check_env_config(replace(EnvConfig(), starts=replace(EnvConfig().starts, depenetrate_tol=float("nan"))))

@@ -196,6 +196,13 @@ class StartSamplingConfig:
     start; :class:`wristmimic.env.starts.StateBank`) instead of the reference's, where one is banked. 0: off."""
     bank_size: int = 16
     """States kept per frame (the newest, in random slots)."""
+    depenetrate: bool = False
+    """Reference starts move the hinges of each finger chain that lies more than ``depenetrate_tol`` inside an
+    object, wall or floor until it does not (:mod:`wristmimic.env.depenetrate`; fingers have no pose targets, so
+    their start angles are free). Frame-0 starts change only where frame 0 already penetrates. Off: on
+    sub2_largetable_000 it shortened training episodes and left frame-0 trials where they were (see the module)."""
+    depenetrate_tol: float = 0.003
+    """Penetration (m) a finger chain may keep at a reference start."""
 
 
 @dataclass(frozen=True)
@@ -368,6 +375,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError("starts: bin_frames and kernel >= 1, alpha in (0, 1], uniform in [0, 1]")
     if not 0 <= st.bank <= 1 or st.bank_size < 1:
         raise ValueError("starts: bank in [0, 1], bank_size >= 1")
+    if not st.depenetrate_tol >= 0:
+        raise ValueError("starts: depenetrate_tol >= 0 (m)")
     ra = cfg.root_assist
     if ra.enabled and (ra.zero_by_frames < 1 or not ra.initial_gain >= 0 or not ra.inertia > 0):
         raise ValueError("root_assist: zero_by_frames >= 1, initial_gain >= 0, inertia > 0")

@@ -24,6 +24,7 @@ import torch
 from wristmimic.env import window as W
 from wristmimic.env.bodies import BodySets
 from wristmimic.env.config import EnvConfig, check_env_config
+from wristmimic.env.depenetrate import DepenetrationStats, depenetrate_fingers
 from wristmimic.env.gravity import gravity_offsets
 from wristmimic.env.observations import (
     GoalRef,
@@ -388,6 +389,12 @@ class WristMimicEnv:
             qpos[:, self._obj_quat_q.flatten()] = r.obj_quat.double().flatten(1)
             qvel[:, self._obj_lin_v.flatten()] = r.obj_linvel.double().flatten(1)
             qvel[:, self._obj_ang_v.flatten()] = r.obj_angvel_local.double().flatten(1)
+        self.depenetration: DepenetrationStats | None = None
+        if self.cfg.starts.depenetrate:
+            table, self.depenetration = depenetrate_fingers(
+                self.scene, qpos.cpu().numpy(), self.cfg.starts.depenetrate_tol
+            )
+            qpos = torch.from_numpy(table).to(qpos.device)
         return qpos, qvel
 
     def reference_state(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
