@@ -16,8 +16,10 @@ Measured on ``sub2_largetable_000`` (recipe of 2026-12-05, seed 0, 409,600 frame
 search that differed only in how it left local minima): the thumbs leave the table in
 all carry frames but the grasp's first ten (up to 2.4 cm left there), a segment next to the palm keeps up to 1.8 cm;
 training episodes were shorter (13.9 against 17.0 frames at 200-400k) and the mid-clip starts of the carry failed
-about twice as often per step; frame-0 trials reached 55.4 frames (0 %), as without it (53-56). The penetrating flat
-fingers under the table top carry part of its weight at a reference start; cleared, they do not.
+about twice as often per step; frame-0 trials reached 55.4 frames (0 %), as without it (53-56). With zero actions
+from carry frames 60 / 70 / 90 (no object controller), the reference's starts keep both hands on the table for 5-6
+frames and end on ``object_error`` after 9-11; cleared starts lose hand contact after 1-4 frames and end after 8-10:
+the flat fingers lodged under the table top hold it at a reference start.
 """
 
 from __future__ import annotations
