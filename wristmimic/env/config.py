@@ -5,6 +5,7 @@ Variants for the paper's tables are built by :func:`variant_config` from a name.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 ACTION_MODES = ("residual", "absolute")
@@ -301,6 +302,11 @@ class EnvConfig:
     gravity_feedforward: bool = False
     """Residual upper-body hinges (not legs, not fingers) also target + tau_g(q_ref) / kp, the gravity load at the
     reference pose over the hinge's stiffness (:mod:`wristmimic.env.gravity`): PD alone sags under gravity."""
+    grip_squeeze: float = 0.0
+    """N; > 0: in the reference's antipodal two-handed holds (both hands on the object from opposite sides), each
+    arm's residual hinges also target J^T (F n) / kp, pressing the wrist with F newtons toward the object
+    (:mod:`wristmimic.env.squeeze`): PD tracking of palms that lie on the faces presses with no force, so nothing
+    carries the object until the policy discovers the squeeze. 0: off."""
     ground_reference: bool = False
     """Lower the humanoid's reference (root and bodies, not the objects) by its floor clearance, so its feet
     stand on the simulated floor (:mod:`wristmimic.env.grounding`; sub2_largetable_000: 2.0 cm)."""
@@ -368,6 +374,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"unknown finger_action {cfg.finger_action!r}; expected one of {', '.join(FINGER_ACTIONS)}")
     if not cfg.finger_delta_scale > 0:
         raise ValueError(f"finger_delta_scale must be > 0, got {cfg.finger_delta_scale}")
+    if not 0.0 <= cfg.grip_squeeze < math.inf:
+        raise ValueError(f"grip_squeeze must be a finite force >= 0 N, got {cfg.grip_squeeze}")
     if not 0.0 <= cfg.foot_clearance <= 0.1:
         raise ValueError(f"foot_clearance must be in [0, 0.1] m, got {cfg.foot_clearance}")
     st = cfg.starts

@@ -38,6 +38,7 @@ from wristmimic.env.observations import (
 from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import CONSTANTS as REWARD_CONSTANTS
 from wristmimic.env.rewards import RewardInputs, compute_reward, ig_weights, sq_dists
+from wristmimic.env.squeeze import squeeze_offsets
 from wristmimic.env.starts import AdaptiveStarts, StateBank
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
 from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_to_matrix, quat_to_rotvec
@@ -243,6 +244,9 @@ class WristMimicEnv:
                 scene, *(x.detach().cpu().double().numpy() for x in (r.root_pos, r.root_quat, r.joint_angles))
             )
             self.gravity_feedforward = f32(g)
+        self.squeeze_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        """(T, D) offsets of the arms' residual hinges that press both hands into an object held between them
+        (``EnvConfig.grip_squeeze``, :mod:`wristmimic.env.squeeze`)."""
         self.eval_info = True
         """Put the evaluation errors (``info["eval"]``) in every step's info; training turns it off (unused there)."""
         self.object_gain = 0.0
@@ -308,6 +312,11 @@ class WristMimicEnv:
         self._horizons = torch.as_tensor(self.cfg.goal_horizons, dtype=torch.long, device=dev)
         # reference state (qpos, qvel) of every frame
         self._ref_qpos, self._ref_qvel = self._reference_state_table()
+        if self.cfg.grip_squeeze > 0.0 and self.cfg.action_mode == "residual":
+            qpos = self._ref_qpos.detach().cpu().numpy()
+            sq = squeeze_offsets(self.scene, self.cfg.grip_squeeze, qpos, r.hand.detach().cpu().numpy())
+            self.squeeze_feedforward = torch.as_tensor(sq, dtype=torch.float32, device=self.device)
+        self._held_offsets = self.gravity_feedforward + self.squeeze_feedforward
         # bodies -> points distances are computed with the key bodies first: the IG reward reads (N, K, P) as a view
         key, P, B = self.sets.key, r.points.shape[1], self.scene.skeleton.num_bodies
         rest = torch.ones(B, dtype=torch.bool, device=dev)
@@ -548,7 +557,7 @@ class WristMimicEnv:
         if self.cfg.action_mode == "residual":
             f = (self.frame + 1 if frames is None else frames).clamp(0, self.ref.num_frames - 1)
             ref = self.ref.joint_angles[f] + self._ff_time * self.ref.joint_vel[f] + self.feedforward[f]
-            ref = ref + self.gravity_feedforward[f]
+            ref = ref + self._held_offsets[f]
             residual = ref + self.cfg.residual_scale * a
             target = torch.where(self.residual_hinges, residual, target)
         if self._delta_cols.numel():
