@@ -86,3 +86,30 @@ def test_sensors_after_a_step_are_those_of_the_new_state(env: WristMimicEnv) -> 
     for w in range(3):
         want = _forward_sensors(m, be.qpos[w].numpy(), be.qvel[w].numpy(), full[w].numpy())
         np.testing.assert_allclose(be.sensordata[w].numpy(), want, atol=1e-6 * max(1.0, np.abs(want).max()))
+
+
+def test_substeps_run_without_sensors_and_reach_the_same_states_as_plain_mj_step(env: WristMimicEnv) -> None:
+    """With exact contacts the substeps skip sensor evaluation (the probe after them computes every sensor):
+    the states reached are bit-identical to plain ``mj_step`` on the scene's own model, sensors on."""
+    m, be = env.scene.model, env.backend
+    off = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+    assert be._step_model.opt.disableflags & off and not m.opt.disableflags & off
+    qpos, qvel = env.reference_state(torch.tensor([2, 6, 11]))
+    be.reset(torch.ones(3, dtype=torch.bool), qpos, qvel)
+    start = be.state.copy()
+    ctrl = torch.zeros(3, m.nu, dtype=torch.float64)
+    ctrl[:, env._act_cols] = env.action_to_ctrl(
+        torch.full((3, env.action_size), 0.3), torch.tensor([3, 7, 12])
+    ).double()
+    sub = env.scene.config.substeps
+    be.step(ctrl, sub)
+    d = mujoco.MjData(m)
+    for w in range(3):
+        mujoco.mj_setState(m, d, start[w], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        mujoco.mj_setState(m, d, np.zeros(m.nv), mujoco.mjtState.mjSTATE_WARMSTART)  # cleared, as every call
+        d.ctrl[:] = ctrl[w].numpy()
+        for _ in range(sub):
+            mujoco.mj_step(m, d)
+        want = np.zeros(be.nstate)
+        mujoco.mj_getState(m, d, want, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        np.testing.assert_array_equal(be.state[w], want)

@@ -127,6 +127,12 @@ class CpuRolloutBackend:
         sensors of the last substep; measured on synth_default this stalled learning (no policy reached the
         contact phase by 410k frames where the default did at ~240k), so it is a benchmark option only."""
         self._after_step_probe = self._probe if self.exact_contacts else probe_model(model, kinematic=True)
+        self._step_model = model
+        """The model the substeps run: with exact contacts a copy with sensors disabled (the probe after the
+        substeps evaluates every sensor; sensors never act on the dynamics, so the states are bit-identical)."""
+        if self.exact_contacts:
+            self._step_model = copy.deepcopy(model)
+            self._step_model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
         self.contact_columns = contact_sensor_columns(model)
         """sensordata columns of contact sensors: after :meth:`step` these come from the last substep."""
         d = mujoco.MjData(model)
@@ -187,13 +193,13 @@ class CpuRolloutBackend:
         n = self.num_worlds
         if self._out_state is None or self._out_state.shape[1] != substeps:
             self._out_state = np.empty((n, substeps, self.nstate))
-            self._out_sensor = np.empty((n, substeps, self.model.nsensordata))
+            self._out_sensor = np.empty((n, substeps, self.model.nsensordata))  # read only without exact contacts
         c = ctrl.detach().cpu().numpy() if isinstance(ctrl, torch.Tensor) else np.asarray(ctrl)
         c = c.astype(np.float64, copy=False)
         c = np.ascontiguousarray(np.broadcast_to(c[:, None, :], (n, substeps, self.model.nu)))
         t0 = time.perf_counter()
         self._pool.rollout(
-            self.model,
+            self._step_model,
             self._datas,
             self._state,
             c,
