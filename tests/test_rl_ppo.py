@@ -181,6 +181,45 @@ def test_adaptive_update_logs_rate_and_sigma_and_keeps_kl_near_the_target() -> N
     assert any(p is net.log_std_param for p in alg.optimizer.param_groups[0]["params"])
 
 
+def test_per_update_schedule_keeps_one_rate_within_an_update_and_answers_its_mean_kl() -> None:
+    """``adaptive_update``: every minibatch step of an update uses the same rate (``adaptive`` raises it at the first
+    minibatch, whose KL is 0 by construction), and the next update's rate follows the logged mean approx KL."""
+
+    def rates(schedule: str) -> tuple[list[list[float]], list[dict[str, float]]]:
+        torch.manual_seed(0)
+        net = ActorCritic(4, 2, (32,), (32,), log_std=-1.0)
+        cfg = PPOConfig(
+            num_envs=8, horizon=4, minibatch_size=8, epochs=2, schedule=schedule, learning_rate=3e-3, lr_min=1e-5
+        )
+        alg = PPO(net, cfg)
+        used: list[list[float]] = []
+        step = alg.optimizer.step
+
+        def spy(*a, **kw):
+            used[-1].append(alg.learning_rate)
+            return step(*a, **kw)
+
+        alg.optimizer.step = spy  # type: ignore[method-assign]
+        logs = []
+        for _ in range(3):
+            st = _filled_storage(net)
+            alg.compute_returns(st, torch.zeros(8))
+            used.append([])
+            logs.append(alg.update(st, torch.Generator().manual_seed(0)))
+        return used, logs
+
+    per_minibatch, _ = rates("adaptive")
+    assert per_minibatch[0][0] == pytest.approx(3e-3 * 1.5)  # KL 0 at the first minibatch raised it
+    per_update, logs = rates("adaptive_update")
+    for u, log in zip(per_update, logs, strict=True):
+        assert len(u) == 8 and len(set(u)) == 1 and log["loss/learning_rate"] == u[0]
+    for prev, u in zip(logs[:-1], per_update[1:], strict=True):
+        kl, lr = prev["loss/approx_kl"], prev["loss/learning_rate"]
+        want = lr / 1.5 if kl > 0.02 else lr * 1.5 if kl < 0.005 else lr  # desired_kl 0.01
+        assert u[0] == pytest.approx(max(want, 1e-5))
+    assert any(a["loss/learning_rate"] != b["loss/learning_rate"] for a, b in zip(logs[:-1], logs[1:], strict=True))
+
+
 def test_log_std_rate_of_its_own_moves_sigma_at_that_rate_outside_the_schedule() -> None:
     """With ``log_std_learning_rate`` the log-std is its own Adam group: the adaptive schedule moves the actor's
     rate only, and sigma moves about that rate per optimiser step (Adam), not the actor's."""

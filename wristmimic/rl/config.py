@@ -16,7 +16,7 @@ from typing import Any
 
 from wristmimic.errors import InputError
 
-SCHEDULES = ("fixed", "adaptive")
+SCHEDULES = ("fixed", "adaptive", "adaptive_update")
 """Learning-rate schedules of :class:`PPOConfig`."""
 
 
@@ -36,7 +36,13 @@ class PPOConfig:
     """Adam step size: constant (``schedule = "fixed"``) or the starting value of the adaptive schedule."""
     schedule: str = "fixed"
     """``fixed`` learning rate, or ``adaptive`` (rsl_rl): after every minibatch step, lr / 1.5 where the
-    approx KL exceeds 2 x ``desired_kl``, lr x 1.5 where it is below half of it, clamped to [lr_min, lr_max]."""
+    approx KL exceeds 2 x ``desired_kl``, lr x 1.5 where it is below half of it, clamped to [lr_min, lr_max].
+    ``adaptive_update``: the same rule once per update, on the update's mean approx KL (the logged
+    ``loss/approx_kl``). Per minibatch, the first minibatch of every update measures KL 0 (the policy has not moved
+    yet), so ``adaptive`` raises the rate x 1.5 at the start of every update: measured on the CPU recipe
+    (``synth_default``, 32 worlds x 16 steps, 2 epochs x 2 minibatches) the four minibatches see median KL 0,
+    0.003, 0.029 and 0.053, and the steps use 1.5, 2.25, 1.5 and 1 x 1e-5 while the rate logged after the update is
+    the floor, 1e-5. Per update, the rate answers the KL that ``loss/approx_kl`` reports."""
     desired_kl: float = 0.01
     """Target approx KL of the adaptive schedule."""
     lr_min: float = 1e-5

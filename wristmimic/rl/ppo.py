@@ -137,5 +137,7 @@ class PPO:
         values = torch.stack([v.double() for v in sums.values()]).cpu().tolist()  # one host sync per update
         out = {k: v / n for k, v in zip(sums, values, strict=True)}
         out["loss/learning_rate"] = self.learning_rate
+        if c.schedule == "adaptive_update":  # the next update's rate, from this one's mean KL
+            self._adapt_learning_rate(out["loss/approx_kl"])
         out["loss/sigma"] = float(torch.exp(pi.log_std.detach()).mean())
         return out
