@@ -359,3 +359,50 @@ def test_sigma_schedule_is_log_linear_between_its_frames_and_holds_after() -> No
     ):
         with pytest.raises(InputError, match="std"):
             PPOConfig(**bad)
+
+
+def test_update_kl_is_the_closed_form_kl_of_the_whole_update_and_can_drive_the_schedule() -> None:
+    """``loss/kl_update``: KL(old || new) of the two Gaussian policies averaged over the rollout's states (learned
+    sigma included); the sample estimator on fresh actions of the old policy agrees with it, while
+    ``loss/approx_kl`` on the rollout's own actions does not have to. ``kl_source=update`` adapts to it."""
+    torch.manual_seed(0)
+    net = ActorCritic(4, 3, (32,), (32,), log_std=-1.0, learn_std=True)
+    cfg = PPOConfig(num_envs=8, horizon=4, minibatch_size=8, epochs=2, learning_rate=3e-3, learn_std=True)
+    alg = PPO(net, cfg)
+    st = _filled_storage(net)
+    alg.compute_returns(st, torch.zeros(8))
+    old_actor = [p.detach().clone() for p in net.actor.parameters()]
+    old_log_std = net.log_std.detach().clone()
+    out = alg.update(st, torch.Generator().manual_seed(0))
+    obs = st.observations.flatten(0, 1)
+    with torch.no_grad():
+        mu_new, s_new = net.actor(obs), net.log_std.exp()
+        mu_old, s_old = st.mu.flatten(0, 1), old_log_std.exp()
+    old = torch.distributions.Normal(mu_old, s_old)
+    new = torch.distributions.Normal(mu_new, s_new)
+    want = torch.distributions.kl_divergence(old, new).sum(-1).mean()
+    assert out["loss/kl_update"] == pytest.approx(float(want), rel=1e-5) and out["loss/kl_update"] > 1e-4
+    assert any(not torch.equal(a, b) for a, b in zip(old_actor, net.actor.parameters(), strict=True))
+    a = old.sample((4000,))  # fresh actions of the old policy: the k3 estimator's mean converges to the same KL
+    log_ratio = (new.log_prob(a) - old.log_prob(a)).sum(-1)
+    k3 = ((log_ratio.exp() - 1) - log_ratio).mean()
+    assert float(k3) == pytest.approx(float(want), rel=0.15)
+    # the per-update schedule on kl_update: the next rate follows the rule on that value
+    cfg = PPOConfig(
+        num_envs=8,
+        horizon=4,
+        minibatch_size=8,
+        epochs=2,
+        schedule="adaptive_update",
+        kl_source="update",
+        learning_rate=3e-3,
+        lr_min=1e-6,
+        desired_kl=1e-9,
+    )
+    alg = PPO(ActorCritic(4, 3, (32,), (32,), log_std=-1.0), cfg)
+    st = _filled_storage(alg.policy)
+    alg.compute_returns(st, torch.zeros(8))
+    out = alg.update(st, torch.Generator().manual_seed(0))
+    assert out["loss/kl_update"] > 2e-9 and alg.learning_rate == pytest.approx(3e-3 / 1.5)
+    with pytest.raises(InputError, match="kl_source"):
+        PPOConfig(kl_source="final")

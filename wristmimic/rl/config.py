@@ -18,6 +18,8 @@ from wristmimic.errors import InputError
 
 SCHEDULES = ("fixed", "adaptive", "adaptive_update")
 """Learning-rate schedules of :class:`PPOConfig`."""
+KL_SOURCES = ("approx", "update")
+"""What ``adaptive_update`` adapts the rate to (:attr:`PPOConfig.kl_source`)."""
 
 
 @dataclass(frozen=True)
@@ -45,14 +47,23 @@ class PPOConfig:
     the floor, 1e-5. Per update, the rate answers the KL that ``loss/approx_kl`` reports."""
     desired_kl: float = 0.01
     """Target approx KL of the adaptive schedule."""
+    kl_source: str = "approx"
+    """The KL that ``adaptive_update`` answers: ``approx``, the update's ``loss/approx_kl`` (CleanRL's estimator,
+    mean over its minibatches before each step, on the minibatch's own sampled actions), or ``update``, the logged
+    ``loss/kl_update``: the closed-form KL(old || new) of the Gaussian policies (rsl_rl's formula) after the whole
+    update, averaged over every state of the rollout. From the second epoch on, ``approx`` is measured on samples
+    the update has already fitted, which it overstates: on the CPU recipe (``synth_default``, first 30 updates)
+    the update moved the policy by KL 0.008 (closed form, and the sample estimator on fresh actions from the old
+    policy agrees: 0.008-0.009) while the same estimator on the rollout's own actions read 0.08-0.12 after the
+    update and ``loss/approx_kl`` 0.02-0.04."""
     lr_min: float = 1e-5
     """Lower clamp of the adaptive learning rate."""
     lr_max: float = 1e-2
     """Upper clamp of the adaptive learning rate."""
     critic_learning_rate: float | None = None
     """A fixed Adam step size of its own for the critic (ProtoMotions: actor 2e-5, critic 1e-4); None: the critic
-    shares the actor's (fixed or adaptive) rate. The CPU recipe's schedule holds the actor at its floor of 1e-5, so
-    a shared critic learns at 1e-5 too. Measured with 1e-4 (400,384 frames, 256 quick trials, strict rule):
+    shares the actor's (fixed or adaptive) rate. The CPU recipe of 2026-12-04 held the actor at its floor of 1e-5, so
+    a shared critic learned at 1e-5 too. Measured with 1e-4 (400,384 frames, 256 quick trials, strict rule):
     synth_small_box seeds 0/1 92.6/100 % (shared rate 54.7/0 %), but synth_default seed 0 5.1 % (shared 93.8 %);
     so the recipe leaves this off (reports/recipe_levers_20261204/)."""
     log_std_learning_rate: float | None = None
@@ -180,6 +191,10 @@ class PPOConfig:
         if self.schedule not in SCHEDULES:
             raise InputError(
                 None, "ppo.schedule", f"unknown schedule {self.schedule!r}", f"one of {', '.join(SCHEDULES)}"
+            )
+        if self.kl_source not in KL_SOURCES:
+            raise InputError(
+                None, "ppo.kl_source", f"unknown KL source {self.kl_source!r}", f"one of {', '.join(KL_SOURCES)}"
             )
         if min(self.num_envs, self.horizon, self.minibatch_size, self.epochs, self.checkpoint_every) < 1:
             raise InputError(None, "ppo", "num_envs, horizon, minibatch_size, epochs, checkpoint_every must be >= 1")

@@ -78,6 +78,18 @@ class PPO:
             lr = min(c.lr_max, lr * 1.5)
         self.optimizer.param_groups[0]["lr"] = lr  # the actor's group (and the critic's, when it shares the rate)
 
+    @torch.no_grad()
+    def update_kl(self, storage: RolloutStorage, log_std_old: torch.Tensor) -> float:
+        """Mean over the rollout's states of the closed-form KL(old || new) between the Gaussian policy that
+        collected it (the stored means, sigma ``exp(log_std_old)``) and the updated one (rsl_rl's formula)."""
+        pi = self.policy
+        mu_old = storage.mu.flatten(0, 1)
+        mu = pi.actor(storage.observations.flatten(0, 1))
+        log_std = pi.log_std
+        var, var_old = torch.exp(2.0 * log_std), torch.exp(2.0 * log_std_old)
+        kl = (log_std - log_std_old + (var_old + (mu_old - mu).square()) / (2.0 * var) - 0.5).sum(-1)
+        return float(kl.double().mean())
+
     def compute_returns(self, storage: RolloutStorage, last_values: torch.Tensor) -> None:
         adv, ret = compute_gae(
             storage.rewards,
@@ -95,6 +107,7 @@ class PPO:
         c, pi = self.cfg, self.policy
         sums: dict[str, torch.Tensor] = {}
         n = 0
+        log_std_old = pi.log_std.detach().clone()
         for mb in storage.minibatches(c.minibatch_size, c.epochs, generator):
             adv = mb["advantages"]
             if c.normalize_advantage:
@@ -136,8 +149,9 @@ class PPO:
             n += 1
         values = torch.stack([v.double() for v in sums.values()]).cpu().tolist()  # one host sync per update
         out = {k: v / n for k, v in zip(sums, values, strict=True)}
+        out["loss/kl_update"] = self.update_kl(storage, log_std_old)
         out["loss/learning_rate"] = self.learning_rate
-        if c.schedule == "adaptive_update":  # the next update's rate, from this one's mean KL
-            self._adapt_learning_rate(out["loss/approx_kl"])
+        if c.schedule == "adaptive_update":  # the next update's rate, from this one's KL
+            self._adapt_learning_rate(out["loss/approx_kl" if c.kl_source == "approx" else "loss/kl_update"])
         out["loss/sigma"] = float(torch.exp(pi.log_std.detach()).mean())
         return out
