@@ -40,7 +40,7 @@ ROWS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "recipe": ("the CPU recipe (cpu preset)", {}, {}),
     "absolute": ("absolute PD targets (InterMimic) instead of residual", {"action_mode": "absolute"}, {}),
     "fixed_ppo": (
-        "fixed lr (the recipe's starting 1e-5) and fixed sigma 0.1 (no adaptive-KL schedule, no learned sigma)",
+        "fixed lr (the recipe's starting rate) and fixed sigma 0.1 (no adaptive-KL schedule, no learned sigma)",
         {},
         {"schedule": "fixed", "learn_std": False},
     ),

@@ -33,6 +33,8 @@ def test_cpu_recipe_stays_in_its_trust_region(synth: Path, tmp_path: Path) -> No
     assert len(m) == ITERATIONS
     kl, clip = m["loss/approx_kl"].median(), m["loss/clip_fraction"].median()
     assert kl <= 0.03 and clip <= 0.3, (kl, clip)
+    # the KL the schedule answers: the closed-form KL of each whole update, held in the band around 0.015
+    assert 0.0 < m["loss/kl_update"].median() <= 0.03, m["loss/kl_update"].median()
     # the first update too: the schedule starts at its floor (from 1e-4 the first approx KL was 1e3-1e9)
     assert m["loss/approx_kl"].iloc[0] < 1.0, m["loss/approx_kl"].iloc[0]
     assert m["loss/learning_rate"].between(ppo.lr_min, ppo.lr_max).all()
@@ -53,6 +55,10 @@ def test_presets_set_their_environment() -> None:
     assert preset("paper").schedule == "fixed" and not preset("paper").learn_std
     # the recipe explores with temporally correlated noise (AR(1), rho 0.9); the paper with white noise
     assert preset("cpu").noise_correlation == pytest.approx(0.9) and preset("paper").noise_correlation == 0.0
+    # the recipe adapts its rate once per update to the update's closed-form KL (one epoch, 4 minibatches)
+    cpu_ppo = preset("cpu")
+    assert (cpu_ppo.schedule, cpu_ppo.kl_source, cpu_ppo.epochs) == ("adaptive_update", "update", 1)
+    assert cpu_ppo.batch_size // cpu_ppo.minibatch_size == 4 and cpu_ppo.desired_kl == pytest.approx(0.015)
 
 
 def test_ablation_rows_each_change_one_lever_of_the_recipe() -> None:
