@@ -290,11 +290,11 @@ PRESETS: dict[str, PPOConfig] = {
     # fitted (the second epoch), which overstated the update's KL ~2.5x (0.02-0.04 logged where the policy moved
     # by 0.008) and held the rate at its floor; per update and on the true KL the policy moves ~2x as far
     # (median ``loss/kl_update`` 0.014-0.017) while ``loss/approx_kl`` stays at 0.017-0.021 and the clip fraction at
-    # 0.17-0.19. At 400k frames (Intel Xeon, 256 quick trials, strict rule; reports/recipe_update_kl_20261205/):
-    # synth_default seeds 0/1 100 / 100 %, synth_small_box seed 1 100 %, synth_turn seeds 0/1 100 / 99.2 %, synth_high_table
-    # seed 0 83.6 %, the 1.55 m humanoid seed 0 94.9 % (the recipe before, AMD EPYC: 100 / 100 / 100 / 100 / 37.1 /
-    # 43.0 / 100 %; turn seed 1 from scratch on the Intel machine: 0 % at 389k); first >= 90 % periodic evaluation at
-    # 225-389k frames, so the lift is still found late for some seeds.
+    # 0.17-0.20. At 400k frames (Intel Xeon, 256 quick trials, strict rule; reports/recipe_update_kl_20261205/):
+    # synth_default seeds 0/1/2 100 / 100 / 100 %, synth_small_box seed 1 100 %, synth_turn seeds 0/1 100 / 99.2 %,
+    # synth_high_table seed 0 83.6 %, the 1.55 m humanoid seed 0 94.9 % (the recipe before, AMD EPYC: 100 / 100 / 100
+    # / 100 / 100 / 37.1 / 43.0 / 100 %; turn seed 1 from scratch on the Intel machine: 0 % at 389k); first >= 90 %
+    # periodic evaluation at 225-389k frames, so the lift is still found late for some seeds.
     "cpu": PPOConfig(
         num_envs=32,
         horizon=16,
