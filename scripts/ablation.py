@@ -2,7 +2,7 @@
 
 Usage:  python scripts/ablation.py DATASET.h5 --scene synth_default --frames 400000 -o reports/ablation_synth_default
         [--rows recipe,white_noise,latest_weights,absolute,fixed_ppo,no_curriculum,uniform_starts,training_sigma,
-        sigma_anneal]
+        sigma_anneal,update_1204]
         [--trials 256]
         [--seed 0]
 
@@ -57,6 +57,20 @@ ROWS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     ),
     "latest_weights": ("the recipe's run, deploying its last update instead of the best periodic evaluation", {}, {}),
     "training_sigma": ("the recipe's run, deployed with the training sigma (~0.1) instead of 0.003", {}, {}),
+    "update_1204": (
+        "the update of 2026-12-04: 2 epochs x 2 minibatches of 256, the rate adapted per minibatch to the sampled"
+        " approx KL (desired 0.008, from and floored at 1e-5)",
+        {},
+        {
+            "epochs": 2,
+            "minibatch_size": 256,
+            "schedule": "adaptive",
+            "kl_source": "approx",
+            "learning_rate": 1e-5,
+            "desired_kl": 0.008,
+            "lr_min": 1e-5,
+        },
+    ),
     "sigma_anneal": (
         "training sigma annealed 0.1 -> 0.003 over the first 250k frames (not learned)",
         {},
