@@ -132,10 +132,13 @@ def run_row(name: str, dataset: Path, scene: str, frames: int, seed: int, trials
 
 
 def _training_signals(m: pd.DataFrame) -> dict[str, Any]:
-    """Median approx KL and clip fraction over the run's updates, and its periodic frame-0 evaluations (%)."""
+    """Median approx KL, update KL (closed form; None for runs that predate it) and clip fraction over the run's
+    updates, and its periodic frame-0 evaluations (%)."""
     periodic = m["eval/success_rate"].dropna() if "eval/success_rate" in m else pd.Series(dtype=float)
+    kl_update = round(float(m["loss/kl_update"].median()), 4) if "loss/kl_update" in m else None
     return {
         "median_approx_kl": round(float(m["loss/approx_kl"].median()), 4),
+        "median_kl_update": kl_update,
         "median_clip_fraction": round(float(m["loss/clip_fraction"].median()), 3),
         "periodic_success_pct": " ".join(f"{100 * v:.0f}" for v in periodic),
     }
@@ -172,7 +175,7 @@ def main() -> None:
     with atomic_output(args.out / "ablation.csv") as tmp:
         df.to_csv(tmp, index=False)
     cols = ["row", "change", "strict_success_pct", "strict_ci95_low_pct", "strict_ci95_high_pct", "success_pct"]
-    cols += ["frames_completed_mean", "median_approx_kl", "median_clip_fraction", "train_s"]
+    cols += ["frames_completed_mean", "median_kl_update", "median_approx_kl", "median_clip_fraction", "train_s"]
     md = (
         f"# Ablation on {args.scene}: {args.frames:,} frames, seed {args.seed}, {args.trials} quick-protocol trials\n\n"
     )

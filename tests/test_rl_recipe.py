@@ -82,6 +82,8 @@ def test_ablation_rows_each_change_one_lever_of_the_recipe() -> None:
     )
     assert abl["_training_signals"](m) == {
         "median_approx_kl": 0.02,
+        "median_kl_update": None,
         "median_clip_fraction": 0.2,
         "periodic_success_pct": "50 100",
     }
+    assert abl["_training_signals"](m.assign(**{"loss/kl_update": [0.03, 0.01, 0.02]}))["median_kl_update"] == 0.02
