@@ -1,0 +1,54 @@
+"""scripts/body_only.py: the body-only copy keeps the humanoid's reference, parks the objects and clears contacts."""
+
+from __future__ import annotations
+
+import runpy
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from wristmimic.env.config import variant_config
+from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.errors import InputError
+from wristmimic.synth.generate import generate
+
+SID = "synth_default"
+SCRIPT = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "body_only.py"))
+
+
+@pytest.fixture(scope="module")
+def synth(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return generate(tmp_path_factory.mktemp("body_only") / "synth.h5", seed=0, variants=("default",))
+
+
+def test_copy_parks_objects_and_clears_contacts(synth: Path, tmp_path: Path) -> None:
+    out = tmp_path / "body.h5"
+    SCRIPT["body_only_copy"](synth, SID, out, park=15.0)
+    with h5py.File(synth, "r") as a, h5py.File(out, "r") as b:
+        sa, sb = a[f"sequences/{SID}"], b[f"sequences/{SID}"]
+        for key in ("root_pos", "root_quat", "joint_angles", "body_pos"):
+            np.testing.assert_array_equal(sa[key][:], sb[key][:])
+        pos = sb["object_pos"][:]
+        np.testing.assert_allclose(pos, np.broadcast_to(sa["object_pos"][:1] + [15.0, 0.0, 0.0], pos.shape), atol=1e-5)
+        assert (sb["object_quat"][:] == sb["object_quat"][:1]).all()
+        assert sa["contacts/hand"][:].any() and not sb["contacts/hand"][:].any()
+        assert (sb["contacts/labels"][:] <= 0).all() and (sb["contacts/window"][:] == -1).all()
+        assert "body_only" in b.attrs
+    env = WristMimicEnv.from_file(out, SID, 2, variant_config("wristmimic"), nthread=1, seed=0)
+    env.reset(start_frames=torch.tensor([0, 10]))
+    _, _, term, _, _ = env.step(torch.zeros(2, env.action_size))
+    assert not term.any()
+    assert not env.ref.hand.any()
+
+
+def test_bad_input_leaves_nothing(synth: Path, tmp_path: Path) -> None:
+    out = tmp_path / "body.h5"
+    with pytest.raises(InputError, match="sequences/nope"):
+        SCRIPT["body_only_copy"](synth, "nope", out)
+    with pytest.raises(InputError, match="--park"):
+        SCRIPT["body_only_copy"](synth, SID, out, park=float("nan"))
+    assert list(tmp_path.iterdir()) == []
+    assert SCRIPT["main"]([str(synth), "--scene", "nope", "-o", str(out)]) == 2
