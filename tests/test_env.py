@@ -83,6 +83,24 @@ def test_fingertip_guidance_reads_each_hands_tips_against_the_object_points(
     assert "error/fingertip" not in plain.step(torch.zeros(1, plain.action_size))[4]["terms"]
 
 
+def test_velocity_factors_read_the_simulated_velocities_against_central_differences(files) -> None:
+    from wristmimic.env.config import RewardWeights
+
+    path, sid = files["smplx"]
+    cfg = variant_config("wristmimic", weights=RewardWeights(root_vel=2.0, body_vel=1.0))
+    env = WristMimicEnv.from_file(path, sid, num_worlds=3, config=cfg, seed=1, nthread=1)
+    env.reset(start_frames=torch.tensor([0, 10, 30]))
+    _, _, _, _, info = env.step(torch.zeros(3, env.action_size))
+    s, f = env.sim_state(), env.frame
+    p = env.ref.body_pos  # the reference velocity at frame f: (p[f+1] - p[f-1]) / 2 at 30 fps
+    v_ref = (p.index_select(0, f + 1) - p.index_select(0, f - 1)) * 15.0
+    e = (v_ref - s.body_linvel).square().sum(-1)
+    assert (e[:, 0] > 0).all() and torch.isfinite(e).all()
+    torch.testing.assert_close(info["terms"]["error/root_vel"], e[:, 0], rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(info["terms"]["error/body_vel"], e.mean(-1), rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(info["terms"]["reward/root_vel"], torch.exp(-2.0 * e[:, 0]), rtol=1e-4, atol=1e-6)
+
+
 def test_goal_differences_are_zero_after_a_reference_reset(files) -> None:
     path, sid = files["smplx"]
     env = WristMimicEnv.from_file(path, sid, num_worlds=4, config=EnvConfig(goal_horizons=(0,)), nthread=1)

@@ -209,6 +209,28 @@ def test_feet_factor_tracks_the_feet_bodies_unweighted() -> None:
         compute_reward(x, SETS, variant_config("wristmimic", weights=w))  # toy SETS name no feet
 
 
+def test_velocity_factors_track_root_and_body_linear_velocities() -> None:
+    g = torch.Generator().manual_seed(1)
+    v, v_ref = torch.randn(N, B, 3, generator=g), torch.randn(N, B, 3, generator=g)
+    x = replace(toy_inputs(), body_linvel=v, ref_body_linvel=v_ref)
+    w = RewardWeights(root_pos=0.0, root_rot=0.0, root_vel=2.0, body_vel=0.5)
+    reward, info = compute_reward(x, SETS, variant_config("wristmimic", weights=w))
+    base, _ = compute_reward(x, SETS, variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    # by hand: root |dv|^2 of body 0, and the mean over all B bodies
+    e_root = ((v_ref[:, 0] - v[:, 0]) ** 2).sum(-1)
+    e_body = ((v_ref - v) ** 2).sum(-1).mean(-1)
+    assert (e_root > 0).all() and not torch.allclose(e_root, e_body)
+    torch.testing.assert_close(info["reward/root_vel"], torch.exp(-2.0 * e_root))
+    torch.testing.assert_close(info["reward/body_vel"], torch.exp(-0.5 * e_body))
+    torch.testing.assert_close(reward, base * info["reward/root_vel"] * info["reward/body_vel"])
+    # equal velocities leave the factors at 1; off at weight 0; an input without velocities is an error
+    same, _ = compute_reward(replace(x, ref_body_linvel=v), SETS, variant_config("wristmimic", weights=w))
+    torch.testing.assert_close(same, base)
+    assert "root_vel" not in factor_names(variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    with pytest.raises(ValueError, match="root_vel"):
+        compute_reward(toy_inputs(), SETS, variant_config("wristmimic", weights=w))
+
+
 def test_fingertip_factor_is_the_mean_tip_distance_of_the_hands_in_reference_contact() -> None:
     x = replace(
         toy_inputs(),

@@ -66,6 +66,14 @@ class RewardWeights:
     weighting leaves the feet, far from a carried object, with almost no position reward and the window lowers
     their rotation lambda, so nothing asks the legs to step where the reference steps (DeepMimic's end-effector
     term)."""
+    root_vel: float = 0.0
+    """Root linear velocity (s^2/m^2): exp(-root_vel * |v_ref - v|^2) with v_ref the reference's central difference
+    at the tracked frame (DeepMimic's and BeyondMimic's anchor velocity term). Positions and rotations say where
+    the body should be but not that it should be moving: a policy that stands while the reference walks loses
+    only through the position factors' slow growth and the body-error termination. 0 turns the factor off."""
+    body_vel: float = 0.0
+    """Body linear velocities (s^2/m^2): exp(-body_vel * mean_b |v_ref,b - v_b|^2) over every body, unweighted
+    (BeyondMimic's body linear velocity term); 0 turns the factor off."""
     fingertip: float = 0.0
     """Contact guidance (1/m): exp(-fingertip * E), E = over the hands in reference contact, the mean distance of
     the hand's fingertips to the nearest object surface point (the ``ig_points`` sample). It asks the fingers to

@@ -5,7 +5,7 @@ Every ``error_*`` function returns the raw error E of one factor, shape (N,); th
 :class:`wristmimic.env.config.RewardWeights`. :func:`compute_reward` returns the product and each factor as
 ``reward/<name>`` plus each raw error as ``error/<name>``, so a user sees which factor collapses.
 
-Factors (names): body_pos, body_rot, [root_pos, root_rot, feet_pos] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
+Factors (names): body_pos, body_rot, [root_pos, root_rot, feet_pos, root_vel, body_vel] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
 (cfg.finger_targets), obj_pos, obj_rot, ig, contact_hand, contact_other, joint_energy, obj_energy_lin,
 obj_energy_ang, contact_energy.
 Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface points, D hinge joints.
@@ -72,6 +72,10 @@ class RewardInputs:
     tip_sq_dists: torch.Tensor | None = None
     """(N, 2, nt) squared distance of each hand's fingertips to the nearest object surface point; needed only
     by the ``fingertip`` factor."""
+    body_linvel: torch.Tensor | None = None
+    """(N, B, 3) simulated body-frame-origin linear velocities (world); needed only by root_vel / body_vel."""
+    ref_body_linvel: torch.Tensor | None = None
+    """(N, B, 3) the reference's at the tracked frame; needed only by root_vel / body_vel."""
     ref_ig_weights: torch.Tensor | None = None
     """(N, K, P) the reference's normalised interaction-graph weights :func:`ig_weights` if precomputed per
     frame; None: computed here from ref_ig_pos and ref_points."""
@@ -162,6 +166,23 @@ def error_feet_pos(sq: torch.Tensor, sets: BodySets) -> torch.Tensor:
 def error_root_rot(ang: torch.Tensor) -> torch.Tensor:
     """E_rootr = angle(q_ref, q) of the root body (rad)."""
     return ang[:, 0]
+
+
+def _vel_sq(x: RewardInputs, name: str) -> torch.Tensor:
+    """(N, B) |v_ref - v|^2 of every body; ``name`` the factor asking (for the error message)."""
+    if x.body_linvel is None or x.ref_body_linvel is None:
+        raise ValueError(f"weights.{name} > 0 needs body_linvel and ref_body_linvel in the reward inputs")
+    return (x.ref_body_linvel - x.body_linvel).square().sum(-1)
+
+
+def error_root_vel(x: RewardInputs) -> torch.Tensor:
+    """E_rootv = |v_ref - v|^2 of the root body ((m/s)^2)."""
+    return _vel_sq(x, "root_vel")[:, 0]
+
+
+def error_body_vel(x: RewardInputs) -> torch.Tensor:
+    """E_bv = mean over every body of |v_ref - v|^2 ((m/s)^2, unweighted)."""
+    return _vel_sq(x, "body_vel").mean(-1)
 
 
 def error_obj_pos(x: RewardInputs) -> torch.Tensor:
@@ -270,7 +291,7 @@ def _lambda_rows(
 def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
     """Names of the reward factors present for this config, in product order."""
     names = ["body_pos", "body_rot"]
-    names += [n for n in ("root_pos", "root_rot", "feet_pos") if getattr(cfg.weights, n) > 0]
+    names += [n for n in ("root_pos", "root_rot", "feet_pos", "root_vel", "body_vel") if getattr(cfg.weights, n) > 0]
     if cfg.wrist_terms:
         names += ["wrist_pos", "wrist_rot"]
     if cfg.finger_targets:
@@ -308,6 +329,10 @@ def compute_reward(
         if not sets.feet.numel():
             raise ValueError("weights.feet_pos > 0 needs a humanoid whose roles name its feet")
         errors["feet_pos"], lams["feet_pos"] = error_feet_pos(sq, sets), w.feet_pos
+    if w.root_vel > 0:
+        errors["root_vel"], lams["root_vel"] = error_root_vel(x), w.root_vel
+    if w.body_vel > 0:
+        errors["body_vel"], lams["body_vel"] = error_body_vel(x), w.body_vel
     if cfg.wrist_terms:
         errors["wrist_pos"], lams["wrist_pos"] = error_wrist_pos(sq, sets), w.gwp
         errors["wrist_rot"], lams["wrist_rot"] = error_wrist_rot(ang, sets), w.gwr

@@ -333,6 +333,12 @@ class WristMimicEnv:
                 for a in range(0, T, 256)
             ]
             self._ref_ig_w = torch.cat(rows_t)
+        # reference body velocities for the velocity factors: central differences (p[f+1] - p[f-1]) fps / 2, the
+        # velocity at the frame itself (the stored forward difference is the one a reset starts from)
+        self._ref_vel: torch.Tensor | None = None
+        if self.cfg.weights.root_vel > 0 or self.cfg.weights.body_vel > 0:
+            v = r.body_linvel
+            self._ref_vel = torch.cat([v[:1], 0.5 * (v[:-1] + v[1:])]) if T > 1 else v.clone()
 
     # -- construction --------------------------------------------------------------------------------------
     @classmethod
@@ -726,6 +732,8 @@ class WristMimicEnv:
             dt=self.scene.config.control_dt,
             ig_sq_dists=None if sq is None else sq[:, : len(key)],
             ref_ig_weights=None if self._ref_ig_w is None else self._ref_ig_w.index_select(0, f),
+            body_linvel=None if self._ref_vel is None else s.body_linvel,
+            ref_body_linvel=None if self._ref_vel is None else self._ref_vel.index_select(0, f),
             tip_sq_dists=self._tip_sq_dists(s, sq) if self.cfg.weights.fingertip > 0 else None,
         )
         return compute_reward(x, self.sets, self.cfg)
