@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -99,6 +100,35 @@ def test_velocity_factors_read_the_simulated_velocities_against_central_differen
     torch.testing.assert_close(info["terms"]["error/root_vel"], e[:, 0], rtol=1e-4, atol=1e-5)
     torch.testing.assert_close(info["terms"]["error/body_vel"], e.mean(-1), rtol=1e-4, atol=1e-5)
     torch.testing.assert_close(info["terms"]["reward/root_vel"], torch.exp(-2.0 * e[:, 0]), rtol=1e-4, atol=1e-6)
+
+
+def test_feet_contact_schedule_follows_the_reference_feet_and_the_simulated_contacts(files) -> None:
+    from wristmimic.env.config import RewardWeights
+    from wristmimic.env.grounding import foot_floor_contact
+
+    path, sid = files["smplx"]
+    cfg = variant_config("wristmimic", weights=RewardWeights(feet_contact=2.0))
+    env = WristMimicEnv.from_file(path, sid, num_worlds=3, config=cfg, seed=1, nthread=1)
+    r, feet = env.ref, env.sets.feet.numpy()
+    assert len(feet) == 4
+    args = (r.root_pos.double().numpy(), r.root_quat.double().numpy(), r.joint_angles.double().numpy())
+    table = foot_floor_contact(env.scene, *args, feet)
+    assert torch.equal(env._ref_feet_contact, torch.from_numpy(table))
+    assert table.any(), "the synthetic humanoid stands on a foot"
+    # a reference floating 3 cm higher throughout stands the same (heights count from the standing height) ...
+    up = args[0] + [0.0, 0.0, 0.03]
+    np.testing.assert_array_equal(foot_floor_contact(env.scene, up, *args[1:], feet), table)
+    # ... and one lifted 30 cm for its last fifth has no foot on the floor there
+    T = len(up)
+    up[: T - T // 5, 2] -= 0.03
+    up[T - T // 5 :, 2] += 0.27
+    assert not foot_floor_contact(env.scene, up, *args[1:], feet)[T - T // 5 :].any()
+    env.reset(start_frames=torch.tensor([0, 10, 30]))
+    _, _, _, _, info = env.step(torch.zeros(3, env.action_size))
+    s, f = env.sim_state(), env.frame
+    want = (s.contact.index_select(1, env.sets.feet) != env._ref_feet_contact.index_select(0, f)).float().mean(-1)
+    torch.testing.assert_close(info["terms"]["error/feet_contact"], want)
+    assert s.contact.index_select(1, env.sets.feet).any()  # simulated feet touch the floor
 
 
 def test_goal_differences_are_zero_after_a_reference_reset(files) -> None:

@@ -231,6 +231,21 @@ def test_velocity_factors_track_root_and_body_linear_velocities() -> None:
         compute_reward(toy_inputs(), SETS, variant_config("wristmimic", weights=w))
 
 
+def test_feet_contact_factor_is_the_share_of_feet_off_the_reference_schedule() -> None:
+    sim = torch.tensor([[True, True, False, False], [True, False, True, False], [False, False, False, False]])
+    ref = torch.tensor([[True, True, False, False], [False, False, True, True], [True, True, True, False]])
+    x = replace(toy_inputs(), feet_contact=sim, ref_feet_contact=ref)
+    w = RewardWeights(root_pos=0.0, root_rot=0.0, feet_contact=2.0)
+    reward, info = compute_reward(x, SETS, variant_config("wristmimic", weights=w))
+    base, _ = compute_reward(x, SETS, variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    _close(info["error/feet_contact"], [0.0, 0.5, 0.75])  # 0, 2 and 3 of 4 feet differ
+    torch.testing.assert_close(info["reward/feet_contact"], torch.exp(-2.0 * info["error/feet_contact"]))
+    torch.testing.assert_close(reward, base * info["reward/feet_contact"])
+    assert "feet_contact" not in factor_names(variant_config("wristmimic", weights=PAPER_WEIGHTS))
+    with pytest.raises(ValueError, match="feet_contact"):
+        compute_reward(toy_inputs(), SETS, variant_config("wristmimic", weights=w))
+
+
 def test_fingertip_factor_is_the_mean_tip_distance_of_the_hands_in_reference_contact() -> None:
     x = replace(
         toy_inputs(),

@@ -74,6 +74,12 @@ class RewardWeights:
     body_vel: float = 0.0
     """Body linear velocities (s^2/m^2): exp(-body_vel * mean_b |v_ref,b - v_b|^2) over every body, unweighted
     (BeyondMimic's body linear velocity term); 0 turns the factor off."""
+    feet_contact: float = 0.0
+    """Foot-floor contact schedule: exp(-feet_contact * E), E = the share of foot bodies (``roles["feet"]``) whose
+    simulated floor contact differs from the reference's (a reference foot stands while its lowest geom is within
+    2 cm of the standing height, :func:`wristmimic.env.grounding.foot_floor_contact`). Position factors leave a
+    foot that drags on the floor through the reference's swing almost unpenalised until it falls behind; this
+    rewards lifting it (the contact schedules of legged-robot locomotion rewards). 0 turns the factor off."""
     fingertip: float = 0.0
     """Contact guidance (1/m): exp(-fingertip * E), E = over the hands in reference contact, the mean distance of
     the hand's fingertips to the nearest object surface point (the ``ig_points`` sample). It asks the fingers to

@@ -46,6 +46,41 @@ def floor_clearance(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, j
     return float(np.median(lowest))
 
 
+def foot_floor_contact(
+    scene: Scene,
+    root_pos: np.ndarray,
+    root_quat: np.ndarray,
+    joint_angles: np.ndarray,
+    feet: np.ndarray,
+    margin: float = 0.02,
+) -> np.ndarray:
+    """(T, F) bool: foot body ``feet[i]`` of the reference stands on the floor at frame t, i.e. its lowest collision
+    geom lies within ``margin`` (m) of the standing height (:func:`floor_clearance`: a mocap reference floats or
+    sinks by a few cm on the simulated floor). A swinging foot of sub2 or the kettle clears it by 3-9 cm at the
+    ball of the foot. No floor: every foot is off it."""
+    m = scene.model
+    T, F = len(joint_angles), len(feet)
+    floors = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    if not floors or F == 0:
+        return np.zeros((T, F), bool)
+    body_ids = [int(scene.body_ids[int(b)]) for b in feet]
+    geoms = [
+        [g for g in range(m.ngeom) if m.geom_bodyid[g] == b and (m.geom_contype[g] or m.geom_conaffinity[g])]
+        for b in body_ids
+    ]
+    if any(not g for g in geoms):
+        raise ValueError("a foot body has no collision geom")
+    stand = floor_clearance(scene, root_pos, root_quat, joint_angles)
+    d, fromto = mujoco.MjData(m), np.zeros(6)
+    out = np.zeros((T, F), bool)
+    for t in range(T):
+        _pose(scene, d, root_pos[t], root_quat[t], joint_angles[t])
+        for i, gs in enumerate(geoms):
+            low = min(mujoco.mj_geomDistance(m, d, g, f, 1.0, fromto) for g in gs for f in floors)
+            out[t, i] = low < stand + margin
+    return out
+
+
 SWING_SPEED = 0.15
 """m/s: a foot whose ankle moves faster than this over the ground (horizontally) is swinging."""
 

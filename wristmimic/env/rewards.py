@@ -5,7 +5,8 @@ Every ``error_*`` function returns the raw error E of one factor, shape (N,); th
 :class:`wristmimic.env.config.RewardWeights`. :func:`compute_reward` returns the product and each factor as
 ``reward/<name>`` plus each raw error as ``error/<name>``, so a user sees which factor collapses.
 
-Factors (names): body_pos, body_rot, [root_pos, root_rot, feet_pos, root_vel, body_vel] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
+Factors (names): body_pos, body_rot, [root_pos, root_rot, feet_pos, root_vel, body_vel,
+feet_contact] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
 (cfg.finger_targets), obj_pos, obj_rot, ig, contact_hand, contact_other, joint_energy, obj_energy_lin,
 obj_energy_ang, contact_energy.
 Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface points, D hinge joints.
@@ -76,6 +77,10 @@ class RewardInputs:
     """(N, B, 3) simulated body-frame-origin linear velocities (world); needed only by root_vel / body_vel."""
     ref_body_linvel: torch.Tensor | None = None
     """(N, B, 3) the reference's at the tracked frame; needed only by root_vel / body_vel."""
+    feet_contact: torch.Tensor | None = None
+    """(N, F) bool: simulated foot bodies touching anything; needed only by feet_contact."""
+    ref_feet_contact: torch.Tensor | None = None
+    """(N, F) bool: the reference's foot bodies on the floor at the tracked frame; needed only by feet_contact."""
     ref_ig_weights: torch.Tensor | None = None
     """(N, K, P) the reference's normalised interaction-graph weights :func:`ig_weights` if precomputed per
     frame; None: computed here from ref_ig_pos and ref_points."""
@@ -185,6 +190,13 @@ def error_body_vel(x: RewardInputs) -> torch.Tensor:
     return _vel_sq(x, "body_vel").mean(-1)
 
 
+def error_feet_contact(x: RewardInputs) -> torch.Tensor:
+    """E_fc = share of foot bodies whose simulated contact differs from the reference's floor contact."""
+    if x.feet_contact is None or x.ref_feet_contact is None:
+        raise ValueError("weights.feet_contact > 0 needs feet_contact and ref_feet_contact in the reward inputs")
+    return (x.feet_contact != x.ref_feet_contact).to(x.body_pos.dtype).mean(-1)
+
+
 def error_obj_pos(x: RewardInputs) -> torch.Tensor:
     """E_op = mean over objects and xyz of (p_ref - p)^2."""
     return _mean((x.ref_obj_pos - x.obj_pos).square(), (1, 2))
@@ -291,7 +303,11 @@ def _lambda_rows(
 def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
     """Names of the reward factors present for this config, in product order."""
     names = ["body_pos", "body_rot"]
-    names += [n for n in ("root_pos", "root_rot", "feet_pos", "root_vel", "body_vel") if getattr(cfg.weights, n) > 0]
+    names += [
+        n
+        for n in ("root_pos", "root_rot", "feet_pos", "root_vel", "body_vel", "feet_contact")
+        if getattr(cfg.weights, n) > 0
+    ]
     if cfg.wrist_terms:
         names += ["wrist_pos", "wrist_rot"]
     if cfg.finger_targets:
@@ -333,6 +349,8 @@ def compute_reward(
         errors["root_vel"], lams["root_vel"] = error_root_vel(x), w.root_vel
     if w.body_vel > 0:
         errors["body_vel"], lams["body_vel"] = error_body_vel(x), w.body_vel
+    if w.feet_contact > 0:
+        errors["feet_contact"], lams["feet_contact"] = error_feet_contact(x), w.feet_contact
     if cfg.wrist_terms:
         errors["wrist_pos"], lams["wrist_pos"] = error_wrist_pos(sq, sets), w.gwp
         errors["wrist_rot"], lams["wrist_rot"] = error_wrist_rot(ang, sets), w.gwr

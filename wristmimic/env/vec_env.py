@@ -26,6 +26,7 @@ from wristmimic.env.bodies import BodySets
 from wristmimic.env.config import EnvConfig, check_env_config
 from wristmimic.env.depenetrate import DepenetrationStats, depenetrate_fingers
 from wristmimic.env.gravity import gravity_offsets
+from wristmimic.env.grounding import foot_floor_contact
 from wristmimic.env.observations import (
     GoalRef,
     RefFrame,
@@ -337,6 +338,18 @@ class WristMimicEnv:
             self._ref_ig_w = torch.cat(rows_t)
         # reference body velocities for the velocity factors: central differences (p[f+1] - p[f-1]) fps / 2, the
         # velocity at the frame itself (the stored forward difference is the one a reset starts from)
+        self._ref_feet_contact: torch.Tensor | None = None
+        if self.cfg.weights.feet_contact > 0:
+            if not self.sets.feet.numel():
+                raise ValueError("weights.feet_contact > 0 needs a humanoid whose roles name its feet")
+            table = foot_floor_contact(
+                self.scene,
+                r.root_pos.double().numpy(),
+                r.root_quat.double().numpy(),
+                r.joint_angles.double().numpy(),
+                self.sets.feet.cpu().numpy(),
+            )
+            self._ref_feet_contact = torch.from_numpy(table).to(dev)
         self._ref_vel: torch.Tensor | None = None
         if self.cfg.weights.root_vel > 0 or self.cfg.weights.body_vel > 0:
             v = r.body_linvel
@@ -740,6 +753,8 @@ class WristMimicEnv:
             ig_sq_dists=None if sq is None else sq[:, : len(key)],
             ref_ig_weights=None if self._ref_ig_w is None else self._ref_ig_w.index_select(0, f),
             body_linvel=None if self._ref_vel is None else s.body_linvel,
+            feet_contact=None if self._ref_feet_contact is None else s.contact.index_select(1, self.sets.feet),
+            ref_feet_contact=None if self._ref_feet_contact is None else self._ref_feet_contact.index_select(0, f),
             ref_body_linvel=None if self._ref_vel is None else self._ref_vel.index_select(0, f),
             tip_sq_dists=self._tip_sq_dists(s, sq) if self.cfg.weights.fingertip > 0 else None,
         )
