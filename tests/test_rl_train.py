@@ -23,9 +23,11 @@ from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.rl import TrainSpec, load_policy, preset, resume_run, start_run
 from wristmimic.rl.checkpoint import load_checkpoint
+from wristmimic.rl.config import preset_env
 from wristmimic.rl.logger import TIME_COLUMNS
 from wristmimic.rl.runner import Runner
 from wristmimic.safe_io import sha256_file
+from wristmimic.scene import SceneConfig
 
 from synthetic import write_intermimic_folder
 
@@ -344,3 +346,35 @@ def test_evaluate_weights_option_loads_the_latest_or_the_deployed(
     assert "policy_weights" not in evaluate("ev", "--weights", "latest")
     ev = evaluate("ev2")
     assert (ev["policy_weights"], ev["policy_weights_iteration"]) == ("best", 1)
+
+
+def test_held_finger_actions_are_zero_in_training_evaluation_and_every_kl(dataset: Path, tmp_path: Path) -> None:
+    from wristmimic.evaluate.policy import load_eval_policy
+
+    spec = _spec(dataset, 2, held_actions="fingers")
+    scene_cfg = SceneConfig(object_actuators=True)
+    env = WristMimicEnv.from_file(dataset, SID, 4, preset_env("cpu", "wristmimic"), scene_cfg, nthread=1, seed=0)
+    fingers = env.finger_actions
+    assert 0 < int(fingers.sum()) < env.action_size
+    runner = Runner(env, spec.ppo, 0, tmp_path / "r", "{}", {"scene": SID, "variant": "wristmimic"})
+    assert torch.equal(runner.policy.active, (~fingers).float())
+    runner.collect()
+    acts = runner.storage.actions.flatten(0, 1)
+    assert (acts[:, fingers] == 0).all() and (acts[:, ~fingers] != 0).all()  # held: no mean, no noise
+    # a held dimension's value changes no log-probability; the entropy and KL count the active ones only
+    net, mu = runner.policy, runner.storage.mu.flatten(0, 1)
+    moved = acts.clone()
+    moved[:, fingers] += 0.7
+    torch.testing.assert_close(net.log_prob(mu, moved), net.log_prob(mu, acts))
+    per_dim = net.log_std + 0.5 * math.log(2 * math.pi * math.e)
+    torch.testing.assert_close(net.entropy(), per_dim[~fingers].sum())
+    runner.alg.update(runner.storage, runner.gen)
+    env.close()
+    # trained and evaluated: the deployed policy holds them too, deterministic or sampled
+    start_run(spec, tmp_path / "run", nthread=1, progress=False)
+    p = load_eval_policy(tmp_path / "run")
+    obs = torch.randn(5, p.policy.net.obs_size)
+    assert (p.policy.act(obs)[:, fingers] == 0).all()
+    assert (p.policy.act(obs, deterministic=False, generator=torch.Generator().manual_seed(0))[:, fingers] == 0).all()
+    with pytest.raises(InputError, match="held_actions"):
+        preset("cpu", held_actions="legs")

@@ -195,6 +195,8 @@ class WristMimicEnv:
             np.repeat(~finger_joint, 3) & (self.cfg.action_mode == "residual"), device=dev
         )
         """(J*3,) bool: hinges whose PD target is reference + residual_scale * a (none in absolute mode)."""
+        self.finger_actions = torch.as_tensor(np.repeat(finger_joint, 3), device=dev)
+        """(J*3,) bool: action dimensions of finger hinges."""
         self.delta_hinges = torch.as_tensor(
             np.repeat(finger_joint, 3) & (self.cfg.finger_action == "delta"), device=dev
         )

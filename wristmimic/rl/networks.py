@@ -78,6 +78,9 @@ class ActorCritic(nn.Module):
         self.actor = mlp(obs_size, actor_hidden, action_size, out_gain=0.01)  # mu ~ 0 at the start
         self.critic = mlp(obs_size, critic_hidden, 1, out_gain=1.0)
         self.min_log_std = float(min_log_std)
+        self.register_buffer("active", torch.ones(action_size))
+        """(A,) 1 for the dimensions the policy acts on, 0 for held ones (:attr:`PPOConfig.held_actions`): their
+        mean and noise are 0 (a = 0) and they add nothing to log-probabilities, entropy or KL."""
         init = torch.full((action_size,), float(log_std))
         if learn_std:  # state-independent, learned (rsl_rl); floored by min_log_std when used
             self.log_std_param = nn.Parameter(init)
@@ -93,20 +96,26 @@ class ActorCritic(nn.Module):
         old = prefix + "log_std"  # checkpoints from before the learned sigma stored the buffer as 'log_std'
         if old in state_dict:
             state_dict[prefix + "log_std_param"] = state_dict.pop(old)
+        if prefix + "active" not in state_dict:  # checkpoints from before held dimensions: every one active
+            state_dict[prefix + "active"] = torch.ones_like(self.active)
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
+    def mean(self, obs_n: torch.Tensor) -> torch.Tensor:
+        """mu(s) of normalised observations ``(N, O)`` -> ``(N, A)``, 0 on held dimensions."""
+        return self.actor(obs_n) * self.active
+
     def entropy(self) -> torch.Tensor:
-        """Entropy of the Gaussian per sample (sum over action dimensions)."""
-        return (self.log_std + 0.5 * math.log(2 * math.pi * math.e)).sum()
+        """Entropy of the Gaussian per sample (sum over the active action dimensions)."""
+        return ((self.log_std + 0.5 * math.log(2 * math.pi * math.e)) * self.active).sum()
 
     def value(self, obs_n: torch.Tensor) -> torch.Tensor:
         """V(s) of normalised observations ``(N, O)`` -> ``(N,)``."""
         return self.critic(obs_n).squeeze(-1)
 
     def log_prob(self, mu: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """log N(a; mu, sigma^2) summed over action dimensions -> ``(N,)``."""
+        """log N(a; mu, sigma^2) summed over the active action dimensions -> ``(N,)``."""
         z = (actions - mu) * torch.exp(-self.log_std)
-        return (-0.5 * z.square() - self.log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+        return ((-0.5 * z.square() - self.log_std - 0.5 * math.log(2 * math.pi)) * self.active).sum(-1)
 
     @torch.no_grad()
     def act(
@@ -114,8 +123,8 @@ class ActorCritic(nn.Module):
     ) -> tuple[torch.Tensor, ...]:
         """Sample actions for normalised observations: ``(actions, log_probs, mu, values)``; ``noise`` (N, A),
         standard normal per step (e.g. temporally correlated), replaces fresh draws from ``generator``."""
-        mu = self.actor(obs_n)
+        mu = self.mean(obs_n)
         if noise is None:
             noise = torch.randn(mu.shape, generator=generator, device=mu.device)
-        actions = mu + torch.exp(self.log_std) * noise
+        actions = mu + torch.exp(self.log_std) * self.active * noise
         return actions, self.log_prob(mu, actions), mu, self.value(obs_n)

@@ -64,10 +64,10 @@ class Policy:
         """Actions for raw observations: the mean, or a sample with the policy's sigma."""
         if obs.shape[-1] != self.net.obs_size:
             raise InputError(None, "obs", f"{obs.shape[-1]} features", f"{self.net.obs_size} (the training scene's)")
-        mu = self.net.actor(self.net.normalizer(obs))
+        mu = self.net.mean(self.net.normalizer(obs))
         if deterministic:
             return mu
-        return mu + self.sigma * torch.randn(mu.shape, generator=generator, device=mu.device)
+        return mu + self.sigma * self.net.active * torch.randn(mu.shape, generator=generator, device=mu.device)
 
     def to(self, device: torch.device | str) -> Policy:
         """Move the network to ``device`` (observations must be there too)."""

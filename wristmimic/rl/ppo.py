@@ -84,10 +84,10 @@ class PPO:
         collected it (the stored means, sigma ``exp(log_std_old)``) and the updated one (rsl_rl's formula)."""
         pi = self.policy
         mu_old = storage.mu.flatten(0, 1)
-        mu = pi.actor(storage.observations.flatten(0, 1))
+        mu = pi.mean(storage.observations.flatten(0, 1))
         log_std = pi.log_std
         var, var_old = torch.exp(2.0 * log_std), torch.exp(2.0 * log_std_old)
-        kl = (log_std - log_std_old + (var_old + (mu_old - mu).square()) / (2.0 * var) - 0.5).sum(-1)
+        kl = ((log_std - log_std_old + (var_old + (mu_old - mu).square()) / (2.0 * var) - 0.5) * pi.active).sum(-1)
         return float(kl.double().mean())
 
     def compute_returns(self, storage: RolloutStorage, last_values: torch.Tensor) -> None:
@@ -112,7 +112,7 @@ class PPO:
             adv = mb["advantages"]
             if c.normalize_advantage:
                 adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-            mu = pi.actor(mb["observations"])
+            mu = pi.mean(mb["observations"])
             log_ratio = pi.log_prob(mu, mb["actions"]) - mb["log_probs"]
             ratio = log_ratio.exp()
             kl = ((ratio - 1) - log_ratio).mean()  # k3 estimator of KL(old || new)

@@ -88,6 +88,8 @@ class Runner:
             cfg.learn_std,
             cfg.min_log_std,
         ).to(dev)
+        if cfg.held_actions == "fingers":
+            self.policy.active.copy_((~env.finger_actions).to(self.policy.active.dtype))
         self.alg = PPO(self.policy, cfg)
         self.ema_net: ActorCritic | None = None
         """An exponential moving average of ``policy`` (``cfg.deploy_ema`` > 0), else None."""
