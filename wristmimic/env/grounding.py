@@ -28,15 +28,25 @@ def _pose(scene: Scene, d: mujoco.MjData, root_pos: np.ndarray, root_quat: np.nd
     mujoco.mj_kinematics(m, d)
 
 
+def _floors(m: mujoco.MjModel) -> list[int]:
+    """Geoms of the world body that are planes (the floor)."""
+    return [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+
+
+def _colliding(m: mujoco.MjModel, bodies: set[int]) -> list[int]:
+    """Geoms of the model bodies ``bodies`` that take part in collisions."""
+    return [g for g in range(m.ngeom) if m.geom_bodyid[g] in bodies and (m.geom_contype[g] or m.geom_conaffinity[g])]
+
+
 def floor_clearance(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, joint_angles: np.ndarray) -> float:
     """Median over frames of the humanoid's lowest geom height above the floor (m; negative: below it); 0.0 when
     the scene has no floor. Root pose (T, 3) / (T, 4) wxyz, hinge angles (T, J*3) in actuator order."""
     m = scene.model
-    floors = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    floors = _floors(m)
     if not floors:
         return 0.0
     human = set(int(b) for b in scene.body_ids)
-    geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] in human and (m.geom_contype[g] or m.geom_conaffinity[g])]
+    geoms = _colliding(m, human)
     d = mujoco.MjData(m)
     fromto = np.zeros(6)
     lowest = np.empty(len(joint_angles))
@@ -60,14 +70,11 @@ def foot_floor_contact(
     ball of the foot. No floor: every foot is off it."""
     m = scene.model
     T, F = len(joint_angles), len(feet)
-    floors = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    floors = _floors(m)
     if not floors or F == 0:
         return np.zeros((T, F), bool)
     body_ids = [int(scene.body_ids[int(b)]) for b in feet]
-    geoms = [
-        [g for g in range(m.ngeom) if m.geom_bodyid[g] == b and (m.geom_contype[g] or m.geom_conaffinity[g])]
-        for b in body_ids
-    ]
+    geoms = [_colliding(m, {b}) for b in body_ids]
     if any(not g for g in geoms):
         raise ValueError("a foot body has no collision geom")
     stand = floor_clearance(scene, root_pos, root_quat, joint_angles)
@@ -135,7 +142,7 @@ def lift_feet(
     swing indicator smoothed over 7 frames times ``clearance``, so it rises and falls with the step. Returns the
     angles and how many foot-frames changed."""
     m = scene.model
-    floors = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    floors = _floors(m)
     chains = _foot_chains(scene)
     out = np.array(joint_angles, dtype=np.float64, copy=True)
     if not floors or not chains or clearance < 0:

@@ -338,8 +338,7 @@ class WristMimicEnv:
                 for a in range(0, T, 256)
             ]
             self._ref_ig_w = torch.cat(rows_t)
-        # reference body velocities for the velocity factors: central differences (p[f+1] - p[f-1]) fps / 2, the
-        # velocity at the frame itself (the stored forward difference is the one a reset starts from)
+        # the reference's foot-floor contact schedule, for the feet_contact factor
         self._ref_feet_contact: torch.Tensor | None = None
         if self.cfg.weights.feet_contact > 0:
             if not self.sets.feet.numel():
@@ -352,6 +351,8 @@ class WristMimicEnv:
                 self.sets.feet.cpu().numpy(),
             )
             self._ref_feet_contact = torch.from_numpy(table).to(dev)
+        # reference body velocities for the velocity factors: central differences (p[f+1] - p[f-1]) fps / 2, the
+        # velocity at the frame itself (the stored forward difference is the one a reset starts from)
         self._ref_vel: torch.Tensor | None = None
         if self.cfg.weights.root_vel > 0 or self.cfg.weights.body_vel > 0:
             v = r.body_linvel
