@@ -101,6 +101,23 @@ def test_resume_continues_bit_for_bit(dataset: Path, tmp_path: Path) -> None:
     assert resume_run(tmp_path / "split", nthread=1, progress=False).status == "up to date"
 
 
+def test_resume_of_a_checkpoint_from_before_held_dimensions_continues_bit_for_bit(
+    dataset: Path, tmp_path: Path
+) -> None:
+    start_run(_spec(dataset, 4), tmp_path / "once", nthread=1, progress=False)
+    start_run(_spec(dataset, 2), tmp_path / "old", nthread=1, progress=False)
+    state = load_checkpoint(tmp_path / "old")
+    for entry in ("policy", "deploy_policy", "ema_policy"):  # saved before the 'active' mask existed
+        if state.get(entry) is not None:
+            state[entry].pop("active")
+    torch.save(state, tmp_path / "old" / "checkpoint.pt")
+    assert "active" not in load_checkpoint(tmp_path / "old")["policy"]
+    r = resume_run(tmp_path / "old", max_frames=4 * 8 * 4, nthread=1, progress=False)
+    assert (r.status, r.iteration) == ("finished", 4)
+    assert _rows(tmp_path / "once") == _rows(tmp_path / "old")
+    assert _same_params(_params(tmp_path / "once"), _params(tmp_path / "old"))
+
+
 def test_ctrl_c_saves_a_checkpoint_and_resume_matches_an_uninterrupted_run(
     dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

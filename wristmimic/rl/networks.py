@@ -93,11 +93,7 @@ class ActorCritic(nn.Module):
         return self.log_std_param.clamp_min(self.min_log_std)
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):  # type: ignore[no-untyped-def]
-        old = prefix + "log_std"  # checkpoints from before the learned sigma stored the buffer as 'log_std'
-        if old in state_dict:
-            state_dict[prefix + "log_std_param"] = state_dict.pop(old)
-        if prefix + "active" not in state_dict:  # checkpoints from before held dimensions: every one active
-            state_dict[prefix + "active"] = torch.ones_like(self.active)
+        upgrade_state_dict(state_dict, self.active.numel(), prefix)
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def mean(self, obs_n: torch.Tensor) -> torch.Tensor:
@@ -128,3 +124,14 @@ class ActorCritic(nn.Module):
             noise = torch.randn(mu.shape, generator=generator, device=mu.device)
         actions = mu + torch.exp(self.log_std) * self.active * noise
         return actions, self.log_prob(mu, actions), mu, self.value(obs_n)
+
+
+def upgrade_state_dict(state: dict[str, torch.Tensor], action_size: int, prefix: str = "") -> dict[str, torch.Tensor]:
+    """Bring an :class:`ActorCritic` state dict saved by an earlier version to today's names, in place: the
+    fixed sigma's buffer ``log_std`` (before the learned sigma) becomes ``log_std_param``, and a missing ``active``
+    mask (before held dimensions) is all ones. Returns ``state``."""
+    if prefix + "log_std" in state:
+        state[prefix + "log_std_param"] = state.pop(prefix + "log_std")
+    if prefix + "active" not in state:
+        state[prefix + "active"] = torch.ones(action_size)
+    return state

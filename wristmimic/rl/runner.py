@@ -30,7 +30,7 @@ from wristmimic.rl.checkpoint import (
 from wristmimic.rl.config import PPOConfig
 from wristmimic.rl.curriculum import ObjectCurriculum, root_assist_gain
 from wristmimic.rl.logger import EpisodeStats, MetricsCsv, train_progress
-from wristmimic.rl.networks import ActorCritic
+from wristmimic.rl.networks import ActorCritic, upgrade_state_dict
 from wristmimic.rl.ppo import PPO
 from wristmimic.rl.storage import RolloutStorage
 
@@ -518,7 +518,7 @@ class Runner:
         for entry in ("policy", "deploy_policy", "ema_policy"):
             if entry not in state:
                 continue
-            saved = {("log_std_param" if k == "log_std" else k): v for k, v in state[entry].items()}
+            saved = upgrade_state_dict(dict(state[entry]), self.env.action_size)
             for key, shape in model.items():
                 if key not in saved:
                     raise InputError(path, f"{entry}.{key}", "missing", net)
