@@ -208,6 +208,13 @@ def test_train_command_writes_a_run_and_resumes(dataset: Path, tmp_path: Path) -
         ],
     )
     assert r.exit_code == 0 and [p.name.split("-")[0] for p in (tmp_path / "all").iterdir()] == [SID], r.output
+    r = cli.invoke(app, [*args, "--out", str(tmp_path / "warm"), "--nthread", "1", "--init-from", str(run)])
+    assert r.exit_code == 0, r.output
+    (warm,) = (tmp_path / "warm").iterdir()
+    init = json.loads((warm / "config.json").read_text())["init"]
+    assert init["path"] == str((run / "checkpoint.pt").resolve()) and init["frames"] == 2 * one
+    bad = cli.invoke(app, ["train", "--resume", str(warm), "--init-from", str(run), "-q"])
+    assert bad.exit_code == 1 and "--resume" in bad.output
     bad = cli.invoke(app, ["train", str(dataset), "--scenes", "some", "-q"])
     assert bad.exit_code == 1 and "error:" in bad.output and "'all'" in bad.output
     bad = cli.invoke(app, ["train", str(dataset), "--scene", SID, "--preset", "huge", "-q"])
@@ -395,3 +402,41 @@ def test_held_finger_actions_are_zero_in_training_evaluation_and_every_kl(datase
     assert (p.policy.act(obs, deterministic=False, generator=torch.Generator().manual_seed(0))[:, fingers] == 0).all()
     with pytest.raises(InputError, match="held_actions"):
         preset("cpu", held_actions="legs")
+
+
+def test_warm_start_takes_the_source_policy_resets_its_statistics_and_is_recorded(
+    dataset: Path, tmp_path: Path
+) -> None:
+    from dataclasses import replace
+
+    from wristmimic.rl.train import _build, _config_dict, _init_source
+
+    start_run(_spec(dataset, 2), tmp_path / "src", nthread=1, progress=False)
+    source = load_checkpoint(tmp_path / "src")
+    spec = replace(_spec(dataset, 2, seed=3, held_actions="fingers"), init_from=tmp_path / "src")
+    path, entry, state, record = _init_source(spec)
+    assert entry == ("deploy_policy" if "deploy_policy" in source else "policy")
+    assert record["sha256"] == sha256_file(tmp_path / "src" / "checkpoint.pt") and record["frames"] == 64
+    config = _config_dict(spec, preset_env("cpu", "wristmimic"), sha256_file(dataset), record)
+    runner = _build(config, tmp_path / "new", 1, dataset)
+    fresh = {k: v.clone() for k, v in runner.policy.state_dict().items()}
+    runner.warm_start(path, entry, state[entry])
+    now = runner.policy.state_dict()
+    assert torch.equal(now["actor.0.weight"], source[entry]["actor.0.weight"])
+    assert not torch.equal(now["actor.0.weight"], fresh["actor.0.weight"])
+    assert torch.equal(now["active"], fresh["active"]) and now["active"].min() == 0  # this run's held fingers
+    assert float(now["normalizer.count"]) == 0.0  # re-estimated from this run's observations
+    runner.env.close()
+    # through start_run: config.json records the source; the same warm start twice gives the same run
+    for name in ("a", "b"):
+        start_run(spec, tmp_path / name, nthread=1, progress=False)
+    assert json.loads((tmp_path / "a" / "config.json").read_text())["init"]["sha256"] == record["sha256"]
+    assert _rows(tmp_path / "a") == _rows(tmp_path / "b")
+    assert _rows(tmp_path / "a") != _rows(tmp_path / "src")
+    # another network size: one line naming the source's weights, and no folder left behind
+    wide = replace(spec, ppo=preset("cpu", **{**TINY, "actor_hidden": (16,)}, max_frames=64))
+    with pytest.raises(InputError, match=r"actor\.0\.weight.*shape"):
+        start_run(wide, tmp_path / "wide", nthread=1, progress=False)
+    assert not (tmp_path / "wide").exists()
+    with pytest.raises(InputError, match="init_weights"):
+        start_run(replace(spec, init_weights="best"), tmp_path / "bad", nthread=1, progress=False)

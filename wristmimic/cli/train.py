@@ -43,6 +43,16 @@ def train_cmd(
         "loses at most the iteration being written and the one in progress; N > 0: after the first iteration, then "
         "every N seconds or the preset's checkpoint_every iterations).",
     ),
+    init_from: Path = typer.Option(
+        None,
+        "--init-from",
+        help="Warm start: begin from this run folder's (or checkpoint's) policy instead of fresh networks, e.g. a "
+        "body-only stage (scripts/body_only.py) before the scene with its object. Needs the same observation and "
+        "action sizes and network; observation statistics are re-estimated. config.json records the source.",
+    ),
+    init_weights: str = typer.Option(
+        "deployed", "--init-weights", help="Which weights --init-from takes: deployed (what evaluate loads) or latest."
+    ),
     nthread: int = typer.Option(None, "--nthread", help="Physics threads (default: all cores)."),
     backend: str = backend_option(),
     device: str = device_option(),
@@ -64,6 +74,8 @@ def train_cmd(
 
     Example: wristmimic train data.h5 --scene SEQ --set ppo.learning_rate=3e-4 --set env.residual_scale=0.4
 
+    Example: wristmimic train kettle.h5 --scene s110_move_kettle --init-from runs/BODY_ONLY_RUN
+
     Example: wristmimic train --resume runs/sub2_largetable_000-wristmimic-seed0-20261123-120000
     """
     from wristmimic.rl.config import preset as make_preset
@@ -75,7 +87,16 @@ def train_cmd(
         if max_frames is not None and max_frames < 1:
             raise InputError(None, "--max-frames", f"{max_frames}", "a positive number of frames")
         if resume is not None:
-            if scene or scenes or dataset or backend != "cpu" or device or checkpoint_seconds is not None or overrides:
+            if (
+                scene
+                or scenes
+                or dataset
+                or backend != "cpu"
+                or device
+                or checkpoint_seconds is not None
+                or overrides
+                or init_from
+            ):
                 raise InputError(None, "--resume", "takes dataset, scene, backend and config from the run folder")
             r = resume_run(resume, max_frames=max_frames, nthread=nthread, progress=not quiet)
             typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
@@ -88,7 +109,17 @@ def train_cmd(
         ppo = make_preset(preset, max_frames=max_frames, num_envs=num_envs, checkpoint_seconds=checkpoint_seconds)
         for sid in _scenes(dataset, scene, scenes):
             spec = TrainSpec(
-                dataset, sid, variant, seed, preset, ppo, ref_frames=ref_frames, backend=backend, device=device
+                dataset,
+                sid,
+                variant,
+                seed,
+                preset,
+                ppo,
+                ref_frames=ref_frames,
+                backend=backend,
+                device=device,
+                init_from=init_from,
+                init_weights=init_weights,
             )
             spec = with_overrides(spec, overrides or ())
             r = start_run(spec, default_run_dir(out, sid, variant, seed), nthread=nthread, progress=not quiet)

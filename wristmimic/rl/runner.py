@@ -506,29 +506,49 @@ class Runner:
         self.metrics = MetricsCsv(self.run_dir / "metrics.csv", keep_until=self.iteration)
         self.saved_iteration = self.iteration
 
+    def _network_text(self, whose: str) -> str:
+        c = self.cfg
+        return (
+            f"the network of {whose} ({self.env.observation_size} observations, actor "
+            f"{list(c.actor_hidden)}, critic {list(c.critic_hidden)}, {self.env.action_size} actions)"
+        )
+
+    def _check_weights(self, path: Path, entry: str, weights: dict[str, torch.Tensor], net: str) -> None:
+        """One-line :class:`InputError` for saved policy weights whose names or shapes are not this network's."""
+        model = {k: tuple(v.shape) for k, v in self.policy.state_dict().items()}
+        saved = upgrade_state_dict(dict(weights), self.env.action_size)
+        for key, shape in model.items():
+            if key not in saved:
+                raise InputError(path, f"{entry}.{key}", "missing", net)
+            if tuple(saved[key].shape) != shape:
+                raise InputError(
+                    path, f"{entry}.{key}", f"shape {list(saved[key].shape)}", f"shape {list(shape)} of {net}"
+                )
+        extra = sorted(set(saved) - set(model))
+        if extra:
+            raise InputError(path, f"{entry}.{extra[0]}", "not a weight of this network", net)
+
+    def warm_start(self, path: Path, entry: str, weights: dict[str, torch.Tensor]) -> None:
+        """Start from another run's policy weights (``entry`` of the checkpoint at ``path``): its actor, critic
+        and sigma, with this run's held dimensions and a fresh optimiser. The observation statistics are
+        re-estimated from this run's observations (their count is reset), since the other run's scene may place
+        objects where this one does not (a body-only copy parks them 20 m away)."""
+        self._check_weights(path, entry, weights, self._network_text("this run's config"))
+        active = self.policy.active.clone()
+        self.policy.load_state_dict(upgrade_state_dict(dict(weights), self.env.action_size))
+        self.policy.active.copy_(active)
+        self.policy.normalizer.count.zero_()
+        if self.ema_net is not None:
+            self.ema_net.load_state_dict(self.policy.state_dict())
+
     def _check_fits(self, path: Path, state: dict[str, Any]) -> None:
         """One-line :class:`InputError` for saved weights, optimiser moments or tensors whose names or shapes are
         not those of the network and environment this run builds (e.g. weights of another network size)."""
         c = self.cfg
-        net = (
-            f"the network of the checkpoint's config ({self.env.observation_size} observations, actor "
-            f"{list(c.actor_hidden)}, critic {list(c.critic_hidden)}, {self.env.action_size} actions)"
-        )
-        model = {k: tuple(v.shape) for k, v in self.policy.state_dict().items()}
+        net = self._network_text("the checkpoint's config")
         for entry in ("policy", "deploy_policy", "ema_policy"):
-            if entry not in state:
-                continue
-            saved = upgrade_state_dict(dict(state[entry]), self.env.action_size)
-            for key, shape in model.items():
-                if key not in saved:
-                    raise InputError(path, f"{entry}.{key}", "missing", net)
-                if tuple(saved[key].shape) != shape:
-                    raise InputError(
-                        path, f"{entry}.{key}", f"shape {list(saved[key].shape)}", f"shape {list(shape)} of {net}"
-                    )
-            extra = sorted(set(saved) - set(model))
-            if extra:
-                raise InputError(path, f"{entry}.{extra[0]}", "not a weight of this network", net)
+            if entry in state:
+                self._check_weights(path, entry, state[entry], net)
         names = {id(p): k for k, p in self.policy.named_parameters()}
         params = [p for g in self.alg.optimizer.param_groups for p in g["params"]]
         opt = state["optimizer"]

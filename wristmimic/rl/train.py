@@ -19,7 +19,13 @@ from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.format.validate import check_sequence
-from wristmimic.rl.checkpoint import CHECKPOINT_NAME, RUN_FILES, load_checkpoint, remove_stale_temporaries
+from wristmimic.rl.checkpoint import (
+    CHECKPOINT_NAME,
+    RUN_FILES,
+    checkpoint_path,
+    load_checkpoint,
+    remove_stale_temporaries,
+)
 from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, preset_env, to_jsonable
 from wristmimic.rl.runner import Runner, TrainingError
 from wristmimic.safe_io import atomic_output, sha256_file
@@ -53,6 +59,11 @@ class TrainSpec:
     """Warp device (``cuda``, ``cuda:1``, ``cpu``); None: a GPU if there is one."""
     overrides: tuple[str, ...] = ()
     """``--set`` strings already applied to ``env``, ``ppo`` and ``scene_config`` (recorded in ``config.json``)."""
+    init_from: Path | None = None
+    """Start from the policy of this run folder or checkpoint (a warm start, e.g. from a body-only stage) instead
+    of fresh networks; ``config.json`` records its path, sha256, weights and frames."""
+    init_weights: str = "deployed"
+    """Which of its weights: ``deployed`` (what ``wristmimic evaluate`` loads) or ``latest`` (the last update's)."""
 
 
 @dataclass
@@ -90,7 +101,7 @@ def git_commit(start: Path | None = None) -> str | None:
     return None
 
 
-def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any]:
+def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str, init: dict[str, Any] | None = None) -> dict[str, Any]:
     return {
         "dataset": {"path": str(Path(spec.dataset).resolve()), "sha256": sha},
         "scene": spec.scene,
@@ -103,6 +114,7 @@ def _config_dict(spec: TrainSpec, env_cfg: EnvConfig, sha: str) -> dict[str, Any
         "scene_config": to_jsonable(spec.scene_config),
         "physics": {"backend": spec.backend, "device": spec.device},
         "overrides": list(spec.overrides),
+        "init": init,
         "code": {"version": wristmimic.__version__, "git_commit": git_commit()},
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
@@ -176,8 +188,15 @@ def start_run(
     if spec.backend not in BACKENDS:
         raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
     env_cfg = spec.env or preset_env(spec.preset, spec.variant)
-    config = _config_dict(spec, env_cfg, sha256_file(data))
+    init_path, init_entry, init_state, init = _init_source(spec)
+    config = _config_dict(spec, env_cfg, sha256_file(data), init)
     runner = _build(config, run_dir, nthread, data)  # before the folder exists: a scene that fails leaves none
+    if init_state is not None:
+        try:
+            runner.warm_start(init_path, init_entry, init_state[init_entry])
+        except BaseException:
+            runner.env.close()
+            raise
     made = [d for d in (run_dir, *run_dir.parents) if not d.exists()]
     try:
         _write_config(run_dir, config)
@@ -192,6 +211,33 @@ def start_run(
     finally:
         runner.env.close()
     return TrainResult(run_dir, status, runner.iteration, runner.frames)
+
+
+INIT_WEIGHTS = ("deployed", "latest")
+
+
+def _init_source(spec: TrainSpec) -> tuple[Path, str, dict[str, Any] | None, dict[str, Any] | None]:
+    """The warm start's checkpoint path, entry, loaded state and ``config.json`` record (None, None: no warm
+    start)."""
+    if spec.init_from is None:
+        return Path(), "", None, None
+    if spec.init_weights not in INIT_WEIGHTS:
+        raise InputError(None, "init_weights", f"unknown weights {spec.init_weights!r}", " or ".join(INIT_WEIGHTS))
+    state = load_checkpoint(spec.init_from)
+    path = checkpoint_path(spec.init_from)
+    entry = "deploy_policy" if spec.init_weights == "deployed" and "deploy_policy" in state else "policy"
+    source = json.loads(state["config"])
+    record = {
+        "path": str(path.resolve()),
+        "sha256": sha256_file(path),
+        "weights": spec.init_weights,
+        "entry": entry,
+        "scene": source.get("scene"),
+        "dataset_sha256": source["dataset"]["sha256"],
+        "iteration": int(state["iteration"]),
+        "frames": int(state["frames"]),
+    }
+    return path, entry, state, record
 
 
 def _check_budget(key: str, frames: int) -> None:
