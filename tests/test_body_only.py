@@ -86,3 +86,46 @@ def test_a_body_only_stage_warm_starts_the_scene_with_its_object(synth: Path, tm
     parked = load_checkpoint(tmp_path / "stage1")["policy"]["normalizer.mean"]
     scene = load_checkpoint(tmp_path / "stage2")["policy"]["normalizer.mean"]
     assert parked.abs().max() > 10.0 and scene.abs().max() < 5.0  # the object 20 m away in stage 1, near in 2
+
+
+def test_keep_window_keeps_the_grasp_phase_and_its_wrist_reset_but_asks_for_no_contact(
+    synth: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "body.h5"
+    SCRIPT["body_only_copy"](synth, SID, out, keep_window=True)
+    with h5py.File(synth, "r") as a, h5py.File(out, "r") as b:
+        ca, cb = a[f"sequences/{SID}/contacts"], b[f"sequences/{SID}/contacts"]
+        first = ca["first_contact_frame"][:]
+        assert (first >= 0).any() and (cb["first_contact_frame"][:] == first).all()
+        assert (cb["window"][:] == ca["window"][:]).all() and (cb["labels"][:] <= 0).all()
+        hand = cb["hand"][:]
+        assert hand.sum() == (first >= 0).sum() and all(hand[first[h], h] for h in range(2) if first[h] >= 0)
+    env = WristMimicEnv.from_file(out, SID, 1, variant_config("wristmimic"), nthread=1, seed=0)
+    full = WristMimicEnv.from_file(synth, SID, 1, variant_config("wristmimic"), nthread=1, seed=0)
+    assert env.ref.t_c == full.ref.t_c >= 0 and torch.equal(env.ref.grasp_hands, full.ref.grasp_hands)
+    full.close()
+    # zero actions through the grasp phase: nothing ends on contact_lost; a wrist pushed away ends on `wrist`
+    env.reset(start_frames=torch.tensor([env.ref.t_c - 1]))
+    reasons = set()
+    for _ in range(14):
+        _, _, term, trunc, info = env.step(torch.zeros(1, env.action_size))
+        reasons |= {env.reason_name(int(r)) for r in info["termination_reason"][term]}
+        if term.any() or trunc.any():
+            break
+    assert "contact_lost" not in reasons
+    # the same push of every hinge at the first contact frame: the grasp phase's 7 cm / 0.2 rad wrist reset ends
+    # the episode in the copy with its window, and nothing ends it in the plain body-only copy
+    plain = tmp_path / "plain.h5"
+    SCRIPT["body_only_copy"](synth, SID, plain)
+    for path, want in ((out, {"wrist"}), (plain, set())):
+        e = WristMimicEnv.from_file(path, SID, 1, variant_config("wristmimic"), nthread=1, seed=0)
+        e.reset(start_frames=torch.tensor([env.ref.t_c]))
+        got = set()
+        for _ in range(12):
+            _, _, term, _, info = e.step(torch.full((1, e.action_size), 0.3))
+            got |= {e.reason_name(int(r)) for r in info["termination_reason"][term]}
+            if term.any():
+                break
+        assert got == want
+        e.close()
+    env.close()
