@@ -414,13 +414,13 @@ def test_warm_start_takes_the_source_policy_resets_its_statistics_and_is_recorde
     start_run(_spec(dataset, 2), tmp_path / "src", nthread=1, progress=False)
     source = load_checkpoint(tmp_path / "src")
     spec = replace(_spec(dataset, 2, seed=3, held_actions="fingers"), init_from=tmp_path / "src")
-    path, entry, state, record = _init_source(spec)
+    path, entry, record, weights = _init_source(spec)
     assert entry == ("deploy_policy" if "deploy_policy" in source else "policy")
     assert record["sha256"] == sha256_file(tmp_path / "src" / "checkpoint.pt") and record["frames"] == 64
     config = _config_dict(spec, preset_env("cpu", "wristmimic"), sha256_file(dataset), record)
     runner = _build(config, tmp_path / "new", 1, dataset)
     fresh = {k: v.clone() for k, v in runner.policy.state_dict().items()}
-    runner.warm_start(path, entry, state[entry])
+    runner.warm_start(path, entry, weights)
     now = runner.policy.state_dict()
     assert torch.equal(now["actor.0.weight"], source[entry]["actor.0.weight"])
     assert not torch.equal(now["actor.0.weight"], fresh["actor.0.weight"])

@@ -534,9 +534,7 @@ class Runner:
         re-estimated from this run's observations (their count is reset), since the other run's scene may place
         objects where this one does not (a body-only copy parks them 20 m away)."""
         self._check_weights(path, entry, weights, self._network_text("this run's config"))
-        active = self.policy.active.clone()
-        self.policy.load_state_dict(upgrade_state_dict(dict(weights), self.env.action_size))
-        self.policy.active.copy_(active)
+        self.policy.load_state_dict({**weights, "active": self.policy.active.clone()})  # old names: load's hook
         self.policy.normalizer.count.zero_()
         if self.ema_net is not None:
             self.ema_net.load_state_dict(self.policy.state_dict())

@@ -188,12 +188,13 @@ def start_run(
     if spec.backend not in BACKENDS:
         raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
     env_cfg = spec.env or preset_env(spec.preset, spec.variant)
-    init_path, init_entry, init_state, init = _init_source(spec)
-    config = _config_dict(spec, env_cfg, sha256_file(data), init)
+    source = _init_source(spec)
+    config = _config_dict(spec, env_cfg, sha256_file(data), None if source is None else source[2])
     runner = _build(config, run_dir, nthread, data)  # before the folder exists: a scene that fails leaves none
-    if init_state is not None:
+    if source is not None:
+        path, entry, _, weights = source
         try:
-            runner.warm_start(init_path, init_entry, init_state[init_entry])
+            runner.warm_start(path, entry, weights)
         except BaseException:
             runner.env.close()
             raise
@@ -216,11 +217,10 @@ def start_run(
 INIT_WEIGHTS = ("deployed", "latest")
 
 
-def _init_source(spec: TrainSpec) -> tuple[Path, str, dict[str, Any] | None, dict[str, Any] | None]:
-    """The warm start's checkpoint path, entry, loaded state and ``config.json`` record (None, None: no warm
-    start)."""
+def _init_source(spec: TrainSpec) -> tuple[Path, str, dict[str, Any], dict[str, Any]] | None:
+    """The warm start's checkpoint path, weights entry, ``config.json`` record and weights; None: no warm start."""
     if spec.init_from is None:
-        return Path(), "", None, None
+        return None
     if spec.init_weights not in INIT_WEIGHTS:
         raise InputError(None, "init_weights", f"unknown weights {spec.init_weights!r}", " or ".join(INIT_WEIGHTS))
     state = load_checkpoint(spec.init_from)
@@ -237,7 +237,7 @@ def _init_source(spec: TrainSpec) -> tuple[Path, str, dict[str, Any] | None, dic
         "iteration": int(state["iteration"]),
         "frames": int(state["frames"]),
     }
-    return path, entry, state, record
+    return path, entry, record, state[entry]
 
 
 def _check_budget(key: str, frames: int) -> None:
