@@ -316,6 +316,10 @@ class EnvConfig:
     gravity_feedforward: bool = False
     """Residual upper-body hinges (not legs, not fingers) also target + tau_g(q_ref) / kp, the gravity load at the
     reference pose over the hinge's stiffness (:mod:`wristmimic.env.gravity`): PD alone sags under gravity."""
+    carry_feedforward: bool = False
+    """Residual arm and torso hinges also target J^T (m g / n) / kp in reference frames where an object is off its
+    supports and n hands touch it: the torques that hold up its weight at each hand (:mod:`wristmimic.env.carry`);
+    PD alone sags under a carried load."""
     grip_squeeze: float = 0.0
     """N; > 0: in the reference's antipodal two-handed holds (both hands on the object from opposite sides), each
     arm's residual hinges also target J^T (F n) / kp, pressing the wrist with F newtons toward the object

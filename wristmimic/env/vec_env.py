@@ -23,6 +23,7 @@ import torch
 
 from wristmimic.env import window as W
 from wristmimic.env.bodies import BodySets
+from wristmimic.env.carry import carry_offsets
 from wristmimic.env.config import EnvConfig, check_env_config
 from wristmimic.env.depenetrate import DepenetrationStats, depenetrate_fingers
 from wristmimic.env.gravity import gravity_offsets
@@ -250,6 +251,9 @@ class WristMimicEnv:
             )
             self.gravity_feedforward = f32(g)
         self.squeeze_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        self.carry_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        """(T, D) offsets of the arm and torso residual hinges that hold up a carried object's weight
+        (``EnvConfig.carry_feedforward``, :mod:`wristmimic.env.carry`)."""
         """(T, D) offsets of the arms' residual hinges that press both hands into an object held between them
         (``EnvConfig.grip_squeeze``, :mod:`wristmimic.env.squeeze`)."""
         self.eval_info = True
@@ -321,7 +325,12 @@ class WristMimicEnv:
             qpos = self._ref_qpos.detach().cpu().numpy()
             sq = squeeze_offsets(self.scene, self.cfg.grip_squeeze, qpos, r.hand.detach().cpu().numpy())
             self.squeeze_feedforward = torch.as_tensor(sq, dtype=torch.float32, device=self.device)
-        self._held_offsets = self.gravity_feedforward + self.squeeze_feedforward
+        if self.cfg.carry_feedforward and self.cfg.action_mode == "residual":
+            qpos = self._ref_qpos.detach().cpu().numpy()
+            labels, hand = r.labels.detach().cpu().numpy(), r.hand.detach().cpu().numpy()
+            carry = carry_offsets(self.scene, qpos, labels, hand)
+            self.carry_feedforward = torch.as_tensor(carry, dtype=torch.float32, device=self.device)
+        self._held_offsets = self.gravity_feedforward + self.squeeze_feedforward + self.carry_feedforward
         # bodies -> points distances are computed with the key bodies first: the IG reward reads (N, K, P) as a view
         key, P, B = self.sets.key, r.points.shape[1], self.scene.skeleton.num_bodies
         rest = torch.ones(B, dtype=torch.bool, device=dev)
