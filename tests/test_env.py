@@ -308,6 +308,43 @@ def test_state_bank_restores_states_the_policy_reached_and_survives_a_checkpoint
         assert torch.equal(ra[0], rb[0]) and torch.equal(ra[1], rb[1])
 
 
+def test_reference_until_folds_late_reference_starts_back_and_keeps_banked_ones(files) -> None:
+    """With ``starts.reference_until`` u, sampled training starts after u restore a banked state or start at
+    f mod (u + 1) from the reference; reference starts up to u bank what they reach; given frames (evaluation)
+    and the default (-1) are untouched."""
+    from dataclasses import replace
+
+    path, sid = files["smplx"]
+    base = EnvConfig()
+    until = 4
+    cfg = replace(base, reset_frame0_prob=0.0, starts=replace(base.starts, adaptive=False, reference_until=until))
+    env = WristMimicEnv.from_file(path, sid, num_worlds=64, config=cfg, seed=0, nthread=1)
+    sampled = env.sample_start_frames(64)
+    assert int(sampled.max()) > until  # else this test could not fail
+    env.sample_start_frames = lambda n: sampled  # type: ignore[method-assign]
+    env._reset_worlds(torch.ones(64, dtype=torch.bool))
+    torch.testing.assert_close(env.frame, torch.where(sampled > until, sampled % (until + 1), sampled))
+    assert bool(env._lineage.all())  # every start is a trusted reference state
+    ref = env.reference_state(env.frame)[0]
+    assert torch.equal(env.backend.qpos, ref)
+    env.reset(start_frames=torch.full((64,), 9))  # given frames: as asked
+    assert bool((env.frame == 9).all()) and not env._lineage.any()
+    # with the bank: a late start restores a state reached from a trusted start where one is banked
+    until = 2
+    cfg = replace(cfg, starts=replace(cfg.starts, bank=1.0, bank_size=2, reference_until=until))
+    env = WristMimicEnv.from_file(path, sid, num_worlds=2, config=cfg, seed=0, nthread=1)
+    env.reset(start_frames=torch.tensor([1, 1]))
+    for _ in range(3):
+        env.step(torch.zeros(2, env.action_size))
+    assert bool((env.frame == 4).all())  # no episode ended
+    assert env.bank.filled[4].any() and not env.bank.filled[5:].any()  # reached 4 from the reference at 1
+    env.sample_start_frames = lambda n: torch.tensor([4, 11])  # type: ignore[method-assign]
+    env._reset_worlds(torch.ones(2, dtype=torch.bool))
+    banked = env.bank.qpos[4][env.bank.filled[4]]
+    assert int(env.frame[0]) == 4 and any(torch.equal(env.backend.qpos[0], b) for b in banked)
+    assert int(env.frame[1]) == 11 % (until + 1)  # nothing banked at 11: folded back
+
+
 def test_ground_reference_lowers_the_humanoid_onto_the_floor(files) -> None:
     from dataclasses import replace
 

@@ -211,6 +211,13 @@ class StartSamplingConfig:
     start; :class:`wristmimic.env.starts.StateBank`) instead of the reference's, where one is banked. 0: off."""
     bank_size: int = 16
     """States kept per frame (the newest, in random slots)."""
+    reference_until: int = -1
+    """>= 0: reference states are trusted only up to this frame. A training start after it that does not restore
+    a banked state starts instead at ``f mod (reference_until + 1)``, and reference starts up to it count as reached
+    by simulation (they bank what they reach). For clips whose mocap grasp is not physically valid: on
+    ``s110_move_kettle`` the reference's hooked fingers lie inside the handle's hulls from frame ~35, and a start
+    there (depenetrated or not, the body held on its reference) drops the kettle within 5-10 frames whatever the
+    policy does, so failure-weighted starts spend most episodes where nothing can be learnt. -1: off."""
     depenetrate: bool = False
     """Reference starts move the hinges of each finger chain that lies more than ``depenetrate_tol`` inside an
     object, wall or floor until it does not (:mod:`wristmimic.env.depenetrate`; fingers have no pose targets, so
@@ -401,6 +408,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError("starts: bin_frames and kernel >= 1, alpha in (0, 1], uniform in [0, 1]")
     if not 0 <= st.bank <= 1 or st.bank_size < 1:
         raise ValueError("starts: bank in [0, 1], bank_size >= 1")
+    if not st.reference_until >= -1:
+        raise ValueError("starts: reference_until >= -1 (frames; -1: off)")
     if not st.depenetrate_tol >= 0:
         raise ValueError("starts: depenetrate_tol >= 0 (m)")
     ra = cfg.root_assist

@@ -448,15 +448,21 @@ class WristMimicEnv:
         """Reference state initialisation of the worlds where ``mask`` (N,) is true, at ``frames`` (N,) or
         sampled start frames. Works on the whole batch with masks: no host synchronisation."""
         f = self.sample_start_frames(self.num_worlds) if frames is None else frames.to(torch.long)
-        qpos, qvel = self.reference_state(f)
-        lineage = f == 0
+        use = None
         if self.bank is not None and frames is None:  # sampled (training) starts only
             have, bq, bv = self.bank.draw(f, self._gen)
             u = torch.rand(self.num_worlds, generator=self._gen, device=self.device)
             use = have & (f > 0) & (u < self.cfg.starts.bank)
+            self.start_counts += torch.stack([(mask & (f > 0)).sum(), (mask & use).sum()])
+        until = self.cfg.starts.reference_until
+        if until >= 0 and frames is None:  # late reference starts fold back into the trusted frames
+            late = f > until if use is None else (f > until) & ~use
+            f = torch.where(late, f % (until + 1), f)
+        qpos, qvel = self.reference_state(f)
+        lineage = f == 0 if until < 0 else f <= until
+        if use is not None:
             qpos, qvel = torch.where(use[:, None], bq, qpos), torch.where(use[:, None], bv, qvel)
             lineage |= use
-            self.start_counts += torch.stack([(mask & (f > 0)).sum(), (mask & use).sum()])
         self._lineage = torch.where(mask, lineage, self._lineage)
         self.backend.reset(mask, qpos, qvel)
         if self._delta_cols.numel():  # a reset holds the start state's finger angles
