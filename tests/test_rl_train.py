@@ -215,6 +215,8 @@ def test_train_command_writes_a_run_and_resumes(dataset: Path, tmp_path: Path) -
     assert init["path"] == str((run / "checkpoint.pt").resolve()) and init["frames"] == 2 * one
     bad = cli.invoke(app, ["train", "--resume", str(warm), "--init-from", str(run), "-q"])
     assert bad.exit_code == 1 and "--resume" in bad.output
+    bad = cli.invoke(app, [*args, "--out", str(tmp_path / "x"), "--init-normalizer", "source"])
+    assert bad.exit_code == 1 and "--init-from" in bad.output and not (tmp_path / "x").exists()
     bad = cli.invoke(app, ["train", str(dataset), "--scenes", "some", "-q"])
     assert bad.exit_code == 1 and "error:" in bad.output and "'all'" in bad.output
     bad = cli.invoke(app, ["train", str(dataset), "--scene", SID, "--preset", "huge", "-q"])
@@ -440,3 +442,28 @@ def test_warm_start_takes_the_source_policy_resets_its_statistics_and_is_recorde
     assert not (tmp_path / "wide").exists()
     with pytest.raises(InputError, match="init_weights"):
         start_run(replace(spec, init_weights="best"), tmp_path / "bad", nthread=1, progress=False)
+    with pytest.raises(InputError, match="init_normalizer"):
+        start_run(replace(spec, init_normalizer="mean"), tmp_path / "bad", nthread=1, progress=False)
+
+
+def test_warm_start_can_keep_the_source_statistics(dataset: Path, tmp_path: Path) -> None:
+    """``init_normalizer="source"`` keeps the source's observation statistics (mean, variance and count), so the
+    first batches of a run with other starts move them as little as they would have moved the source's; the
+    choice is recorded."""
+    from dataclasses import replace
+
+    start_run(_spec(dataset, 2), tmp_path / "src", nthread=1, progress=False)
+    source = load_checkpoint(tmp_path / "src")
+    entry = "deploy_policy" if "deploy_policy" in source else "policy"
+    spec = replace(_spec(dataset, 1, seed=3), init_from=tmp_path / "src", init_normalizer="source")
+    start_run(spec, tmp_path / "keep", nthread=1, progress=False)
+    start_run(replace(spec, init_normalizer="reset"), tmp_path / "reset", nthread=1, progress=False)
+    count = float(source[entry]["normalizer.count"])
+    assert count > 0
+    kept = load_checkpoint(tmp_path / "keep")["policy"]
+    reset = load_checkpoint(tmp_path / "reset")["policy"]
+    # one more iteration's observations on top of the source's, against this run's alone
+    assert float(kept["normalizer.count"]) > count > float(reset["normalizer.count"]) > 0
+    old_mean = source[entry]["normalizer.mean"]
+    assert (kept["normalizer.mean"] - old_mean).abs().max() < (reset["normalizer.mean"] - old_mean).abs().max()
+    assert json.loads((tmp_path / "keep" / "config.json").read_text())["init"]["normalizer"] == "source"

@@ -53,6 +53,12 @@ def train_cmd(
     init_weights: str = typer.Option(
         "deployed", "--init-weights", help="Which weights --init-from takes: deployed (what evaluate loads) or latest."
     ),
+    init_normalizer: str = typer.Option(
+        "reset",
+        "--init-normalizer",
+        help="Observation statistics of --init-from: reset (re-estimated here; for another scene or a body-only "
+        "copy) or source (kept; for the same scene with other starts or terms).",
+    ),
     nthread: int = typer.Option(None, "--nthread", help="Physics threads (default: all cores)."),
     backend: str = backend_option(),
     device: str = device_option(),
@@ -101,6 +107,8 @@ def train_cmd(
             r = resume_run(resume, max_frames=max_frames, nthread=nthread, progress=not quiet)
             typer.echo(f"{r.run_dir}: {r.status} at iteration {r.iteration} ({r.frames:,} frames)")
             return
+        if init_normalizer != "reset" and init_from is None:
+            raise InputError(None, "--init-normalizer", f"{init_normalizer!r} without --init-from", "--init-from RUN")
         if dataset is None:
             raise InputError(None, "DATASET", "missing", "a canonical .h5 file (or --resume RUN_DIR)")
         if not dataset.is_file():
@@ -120,6 +128,7 @@ def train_cmd(
                 device=device,
                 init_from=init_from,
                 init_weights=init_weights,
+                init_normalizer=init_normalizer,
             )
             spec = with_overrides(spec, overrides or ())
             r = start_run(spec, default_run_dir(out, sid, variant, seed), nthread=nthread, progress=not quiet)

@@ -528,14 +528,18 @@ class Runner:
         if extra:
             raise InputError(path, f"{entry}.{extra[0]}", "not a weight of this network", net)
 
-    def warm_start(self, path: Path, entry: str, weights: dict[str, torch.Tensor]) -> None:
+    def warm_start(
+        self, path: Path, entry: str, weights: dict[str, torch.Tensor], reset_normalizer: bool = True
+    ) -> None:
         """Start from another run's policy weights (``entry`` of the checkpoint at ``path``): its actor, critic
-        and sigma, with this run's held dimensions and a fresh optimiser. The observation statistics are
-        re-estimated from this run's observations (their count is reset), since the other run's scene may place
-        objects where this one does not (a body-only copy parks them 20 m away)."""
+        and sigma, with this run's held dimensions and a fresh optimiser. With ``reset_normalizer`` the observation
+        statistics are re-estimated from this run's observations (their count is reset), since the other run's
+        scene may place objects where this one does not (a body-only copy parks them 20 m away); else they are
+        kept, count and all, and updated on as in the source run."""
         self._check_weights(path, entry, weights, self._network_text("this run's config"))
         self.policy.load_state_dict({**weights, "active": self.policy.active.clone()})  # old names: load's hook
-        self.policy.normalizer.count.zero_()
+        if reset_normalizer:
+            self.policy.normalizer.count.zero_()
         if self.ema_net is not None:
             self.ema_net.load_state_dict(self.policy.state_dict())
 

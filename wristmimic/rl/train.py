@@ -64,6 +64,11 @@ class TrainSpec:
     of fresh networks; ``config.json`` records its path, sha256, weights and frames."""
     init_weights: str = "deployed"
     """Which of its weights: ``deployed`` (what ``wristmimic evaluate`` loads) or ``latest`` (the last update's)."""
+    init_normalizer: str = "reset"
+    """The observation statistics of a warm start: ``reset`` (re-estimated from this run's observations: the source
+    scene placed objects elsewhere, e.g. a body-only copy parks them 20 m away) or ``source`` (kept and updated on:
+    the same scene with other starts or terms, whose first batches would otherwise set statistics the policy never
+    saw)."""
 
 
 @dataclass
@@ -194,7 +199,7 @@ def start_run(
     if source is not None:
         path, entry, _, weights = source
         try:
-            runner.warm_start(path, entry, weights)
+            runner.warm_start(path, entry, weights, reset_normalizer=spec.init_normalizer == "reset")
         except BaseException:
             runner.env.close()
             raise
@@ -215,6 +220,7 @@ def start_run(
 
 
 INIT_WEIGHTS = ("deployed", "latest")
+INIT_NORMALIZER = ("reset", "source")
 
 
 def _init_source(spec: TrainSpec) -> tuple[Path, str, dict[str, Any], dict[str, Any]] | None:
@@ -223,6 +229,10 @@ def _init_source(spec: TrainSpec) -> tuple[Path, str, dict[str, Any], dict[str, 
         return None
     if spec.init_weights not in INIT_WEIGHTS:
         raise InputError(None, "init_weights", f"unknown weights {spec.init_weights!r}", " or ".join(INIT_WEIGHTS))
+    if spec.init_normalizer not in INIT_NORMALIZER:
+        raise InputError(
+            None, "init_normalizer", f"unknown choice {spec.init_normalizer!r}", " or ".join(INIT_NORMALIZER)
+        )
     state = load_checkpoint(spec.init_from)
     path = checkpoint_path(spec.init_from)
     entry = "deploy_policy" if spec.init_weights == "deployed" and "deploy_policy" in state else "policy"
@@ -231,6 +241,7 @@ def _init_source(spec: TrainSpec) -> tuple[Path, str, dict[str, Any], dict[str, 
         "path": str(path.resolve()),
         "sha256": sha256_file(path),
         "weights": spec.init_weights,
+        "normalizer": spec.init_normalizer,
         "entry": entry,
         "scene": source.get("scene"),
         "dataset_sha256": source["dataset"]["sha256"],
