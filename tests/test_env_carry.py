@@ -4,13 +4,13 @@ in training, evaluation and view."""
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 import torch
+from targets import assert_train_evaluate_view_targets_match
 
 from wristmimic.env.carry import lifted_frames
 from wristmimic.env.config import variant_config
@@ -77,22 +77,7 @@ def test_carry_off_by_default_and_not_in_absolute_mode(synth: Path) -> None:
 
 
 def test_train_evaluate_and_view_apply_the_same_carry(synth: Path, tmp_path: Path) -> None:
-    from wristmimic.evaluate.policy import load_eval_policy
-    from wristmimic.evaluate.trials import make_env
-    from wristmimic.rl import TrainSpec, preset, start_run
-    from wristmimic.view.rollout import env_for_policy
-
-    env_cfg = variant_config("wristmimic", carry_feedforward=True)
-    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
-    spec = TrainSpec(synth, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32), env=env_cfg)
-    start_run(spec, tmp_path / "run", progress=False)
-    policy = load_eval_policy(tmp_path / "run")
-    train_env = _env(synth, carry_feedforward=True)
     frames = torch.tensor([70, 90])
-    a = torch.linspace(-1, 1, 2 * train_env.action_size).reshape(2, -1)
-    want = train_env.action_to_ctrl(a, frames)
-    assert train_env.carry_feedforward[frames].abs().max() > 1e-3
-    for env in (make_env(policy.metadata, 2), env_for_policy(policy, None, None)):
-        assert env.cfg.carry_feedforward
-        n = env.num_worlds
-        torch.testing.assert_close(env.action_to_ctrl(a[:n], frames[:n]), want[:n], rtol=0, atol=0)
+    assert_train_evaluate_view_targets_match(
+        synth, SID, tmp_path / "run", frames, "carry_feedforward", carry_feedforward=True
+    )

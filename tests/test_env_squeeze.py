@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 import torch
+from targets import assert_train_evaluate_view_targets_match
 
 from wristmimic.env.config import check_env_config, variant_config
 from wristmimic.env.squeeze import arm_chain, hold_weights, press_directions
@@ -85,22 +86,7 @@ def test_squeeze_off_by_default_and_checked(synth: Path) -> None:
 
 
 def test_train_evaluate_and_view_apply_the_same_squeeze(synth: Path, tmp_path: Path) -> None:
-    from wristmimic.evaluate.policy import load_eval_policy
-    from wristmimic.evaluate.trials import make_env
-    from wristmimic.rl import TrainSpec, preset, start_run
-    from wristmimic.view.rollout import env_for_policy
-
-    env_cfg = variant_config("wristmimic", grip_squeeze=FORCE)
-    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
-    spec = TrainSpec(synth, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32), env=env_cfg)
-    start_run(spec, tmp_path / "run", progress=False)
-    policy = load_eval_policy(tmp_path / "run")
-    train_env = _env(synth, grip_squeeze=FORCE)
     frames = torch.tensor([60, 75])
-    a = torch.linspace(-1, 1, 2 * train_env.action_size).reshape(2, -1)
-    want = train_env.action_to_ctrl(a, frames)
-    assert train_env.squeeze_feedforward[frames].abs().max() > 1e-3
-    for env in (make_env(policy.metadata, 2), env_for_policy(policy, None, None)):
-        assert env.cfg.grip_squeeze == FORCE
-        n = env.num_worlds
-        torch.testing.assert_close(env.action_to_ctrl(a[:n], frames[:n]), want[:n], rtol=0, atol=0)
+    assert_train_evaluate_view_targets_match(
+        synth, SID, tmp_path / "run", frames, "squeeze_feedforward", grip_squeeze=FORCE
+    )

@@ -22,7 +22,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from wristmimic.env.gravity import leg_bodies
+from wristmimic.env.gravity import upper_body_hinges
 from wristmimic.scene import Scene
 
 LIFT_GAP = 0.005
@@ -85,8 +85,7 @@ def carry_offsets(scene: Scene, qpos: np.ndarray, labels: np.ndarray, hand: np.n
     # the weight of the lifted objects (the hand contact labels do not say which object a hand holds)
     mass = np.array([m.body_mass[o.body_id] for o in scene.dynamic_objects])
     weight = (lifted * mass).sum(-1) * -m.opt.gravity[2]
-    excluded = set(int(b) for b in roles["fingers"]) | set(leg_bodies(scene))
-    keep = np.repeat([int(b) not in excluded for b in skel.joint_bodies], 3)
+    keep = upper_body_hinges(scene)
     dofs = scene.hinge_dofadr.reshape(-1)
     kp = scene.gains[:, 0]
     hand_bodies = [np.asarray(roles[k], dtype=int) for k in ("left_hand", "right_hand")]

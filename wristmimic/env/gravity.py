@@ -38,15 +38,18 @@ def leg_bodies(scene: Scene) -> list[int]:
     return sorted(out)
 
 
+def upper_body_hinges(scene: Scene) -> np.ndarray:
+    """(J*3,) bool: hinges of the upper body (neither legs nor fingers), in actuator order."""
+    excluded = set(int(b) for b in scene.humanoid.roles["fingers"]) | set(leg_bodies(scene))
+    return np.repeat([int(b) not in excluded for b in scene.skeleton.joint_bodies], 3)
+
+
 def gravity_offsets(scene: Scene, root_pos: np.ndarray, root_quat: np.ndarray, joint_angles: np.ndarray) -> np.ndarray:
     """(T, J*3) PD-target offsets ``tau_g / kp`` of every hinge at each reference frame (root pose (T, 3) /
     (T, 4) wxyz, hinge angles (T, J*3) in actuator order); zero on leg and finger hinges."""
     m = scene.model
     d = mujoco.MjData(m)
-    skel = scene.skeleton
-    fingers = set(int(b) for b in scene.humanoid.roles["fingers"])
-    excluded = fingers | set(leg_bodies(scene))
-    keep = np.repeat([int(b) not in excluded for b in skel.joint_bodies], 3)
+    keep = upper_body_hinges(scene)
     qadr, dadr = scene.hinge_qposadr.reshape(-1), scene.hinge_dofadr.reshape(-1)
     kp = scene.gains[:, 0]
     out = np.zeros((len(joint_angles), len(qadr)))

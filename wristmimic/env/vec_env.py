@@ -251,11 +251,11 @@ class WristMimicEnv:
             )
             self.gravity_feedforward = f32(g)
         self.squeeze_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        """(T, D) offsets of the arms' residual hinges that press both hands into an object held between them
+        (``EnvConfig.grip_squeeze``, :mod:`wristmimic.env.squeeze`)."""
         self.carry_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
         """(T, D) offsets of the arm and torso residual hinges that hold up a carried object's weight
         (``EnvConfig.carry_feedforward``, :mod:`wristmimic.env.carry`)."""
-        """(T, D) offsets of the arms' residual hinges that press both hands into an object held between them
-        (``EnvConfig.grip_squeeze``, :mod:`wristmimic.env.squeeze`)."""
         self.eval_info = True
         """Put the evaluation errors (``info["eval"]``) in every step's info; training turns it off (unused there)."""
         self.object_gain = 0.0
@@ -321,15 +321,14 @@ class WristMimicEnv:
         self._horizons = torch.as_tensor(self.cfg.goal_horizons, dtype=torch.long, device=dev)
         # reference state (qpos, qvel) of every frame
         self._ref_qpos, self._ref_qvel = self._reference_state_table()
-        if self.cfg.grip_squeeze > 0.0 and self.cfg.action_mode == "residual":
-            qpos = self._ref_qpos.detach().cpu().numpy()
-            sq = squeeze_offsets(self.scene, self.cfg.grip_squeeze, qpos, r.hand.detach().cpu().numpy())
-            self.squeeze_feedforward = torch.as_tensor(sq, dtype=torch.float32, device=self.device)
-        if self.cfg.carry_feedforward and self.cfg.action_mode == "residual":
-            qpos = self._ref_qpos.detach().cpu().numpy()
-            labels, hand = r.labels.detach().cpu().numpy(), r.hand.detach().cpu().numpy()
-            carry = carry_offsets(self.scene, qpos, labels, hand)
-            self.carry_feedforward = torch.as_tensor(carry, dtype=torch.float32, device=self.device)
+        if self.cfg.action_mode == "residual" and (self.cfg.grip_squeeze > 0.0 or self.cfg.carry_feedforward):
+            qpos, hand = self._ref_qpos.detach().cpu().numpy(), r.hand.detach().cpu().numpy()
+            if self.cfg.grip_squeeze > 0.0:
+                sq = squeeze_offsets(self.scene, self.cfg.grip_squeeze, qpos, hand)
+                self.squeeze_feedforward = torch.as_tensor(sq, dtype=torch.float32, device=self.device)
+            if self.cfg.carry_feedforward:
+                carry = carry_offsets(self.scene, qpos, r.labels.detach().cpu().numpy(), hand)
+                self.carry_feedforward = torch.as_tensor(carry, dtype=torch.float32, device=self.device)
         self._held_offsets = self.gravity_feedforward + self.squeeze_feedforward + self.carry_feedforward
         # bodies -> points distances are computed with the key bodies first: the IG reward reads (N, K, P) as a view
         key, P, B = self.sets.key, r.points.shape[1], self.scene.skeleton.num_bodies
