@@ -42,14 +42,14 @@ def bench(path: Path, sid: str, preset_name: str, iterations: int, num_envs: int
     with tempfile.TemporaryDirectory() as tmp:
         runner = Runner(env, cfg, 0, Path(tmp), "{}", {"scene": sid, "variant": "wristmimic"})
         runner.collect()
-        runner.alg.update(runner.storage, runner.gen)  # warm-up iteration
+        runner.update()  # warm-up iteration
         runner.storage.clear()
         t_collect = t_update = 0.0
         for _ in range(iterations):
             t0 = time.perf_counter()
             runner.collect()
             t1 = time.perf_counter()
-            runner.alg.update(runner.storage, runner.gen)
+            runner.update()
             runner.storage.clear()
             t_collect, t_update = t_collect + t1 - t0, t_update + time.perf_counter() - t1
     sub = env.scene.config.substeps

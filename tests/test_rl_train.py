@@ -45,7 +45,7 @@ def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _spec(dataset: Path, iterations: int, seed: int = 0, **kw) -> TrainSpec:
-    ppo = preset("cpu", **TINY, max_frames=4 * 8 * iterations, checkpoint_every=2, **kw)
+    ppo = preset("cpu", **{**TINY, **kw}, max_frames=4 * 8 * iterations, checkpoint_every=2)
     return TrainSpec(dataset, SID, "wristmimic", seed, "cpu", ppo)
 
 
@@ -86,6 +86,41 @@ def test_same_seed_gives_identical_metrics_and_parameters(dataset: Path, tmp_pat
     assert _same_params(_params(tmp_path / "a"), _params(tmp_path / "b"))
     assert not _same_params(_params(tmp_path / "a"), _params(tmp_path / "c"))
     assert _rows(tmp_path / "a") != _rows(tmp_path / "c")
+
+
+def test_policy_steps_on_one_torch_thread_and_the_update_on_the_physics_threads(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from wristmimic.rl.networks import ActorCritic
+    from wristmimic.rl.ppo import PPO
+
+    seen: dict[str, set[int]] = {"act": set(), "update": set()}
+
+    def spy(name: str, fn):  # type: ignore[no-untyped-def]
+        def wrapped(*a, **kw):  # type: ignore[no-untyped-def]
+            seen[name].add(torch.get_num_threads())
+            return fn(*a, **kw)
+
+        return wrapped
+
+    monkeypatch.setattr(ActorCritic, "act", spy("act", ActorCritic.act))
+    monkeypatch.setattr(PPO, "update", spy("update", PPO.update))
+    before = torch.get_num_threads()
+    torch.set_num_threads(3)
+    try:
+        start_run(_spec(dataset, 2), tmp_path / "r", nthread=2, progress=False)
+        assert torch.get_num_threads() == 3  # the caller's count is restored
+    finally:
+        torch.set_num_threads(before)
+    assert seen == {"act": {1}, "update": {2}}
+
+
+def test_results_do_not_depend_on_the_thread_counts(dataset: Path, tmp_path: Path) -> None:
+    wide = {"actor_hidden": (512, 256), "critic_hidden": (512, 256)}  # the CPU recipe's widths
+    for n in (1, 2):
+        start_run(_spec(dataset, 2, **wide), tmp_path / str(n), nthread=n, progress=False)
+    assert _rows(tmp_path / "1") == _rows(tmp_path / "2")
+    assert _same_params(_params(tmp_path / "1"), _params(tmp_path / "2"))
 
 
 def test_resume_continues_bit_for_bit(dataset: Path, tmp_path: Path) -> None:

@@ -48,6 +48,7 @@ from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
 from wristmimic.sim.backend import PhysicsBackend, make_backend
+from wristmimic.threads import torch_threads
 
 _FLOAT32_TINY = torch.finfo(torch.float32).tiny
 """The smallest normal float32: observation entries below it are set to 0."""
@@ -609,12 +610,8 @@ class WristMimicEnv:
 
     def step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
         """Advance every world one 30 Hz control step."""
-        threads = torch.get_num_threads()
-        torch.set_num_threads(self.cfg.math_threads)
-        try:
+        with torch_threads(self.cfg.math_threads):
             return self._step(action)
-        finally:
-            torch.set_num_threads(threads)
 
     def _step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
         self.prepare_step(action)

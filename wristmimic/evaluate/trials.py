@@ -25,6 +25,7 @@ from wristmimic.evaluate.metrics import TrialSums, is_strict_success, is_success
 from wristmimic.evaluate.noise import normal, trial_seeds
 from wristmimic.evaluate.policy import EvalPolicy, act_rows
 from wristmimic.evaluate.protocol import InitialStateNoise, Protocol
+from wristmimic.threads import torch_threads
 
 Records = dict[str, np.ndarray]
 """Completed trials as columns (see :data:`wristmimic.evaluate.metrics.TRIAL_COLUMNS`, minus ``scene``)."""
@@ -139,14 +140,10 @@ def run_trials(
     ``trial_ids``: run trials ``trial_ids[start:stop]`` (any trial numbers, seeded as in the full run) instead.
     ``recorder`` is told when trials begin and end (export records their states).
     """
-    before = torch.get_num_threads()
-    torch.set_num_threads(threads or env.cfg.math_threads)
     # a copy (torch.tensor): callers may pass read-only arrays, which torch.as_tensor would share and warn about
     ids = None if trial_ids is None else torch.tensor(np.asarray(trial_ids), dtype=torch.long)
-    try:
+    with torch_threads(threads or env.cfg.math_threads):
         return _run(env, policy, settings, start, stop, sink, recorder, ids)
-    finally:
-        torch.set_num_threads(before)
 
 
 def _run(

@@ -33,6 +33,7 @@ from wristmimic.rl.logger import EpisodeStats, MetricsCsv, train_progress
 from wristmimic.rl.networks import ActorCritic, upgrade_state_dict
 from wristmimic.rl.ppo import PPO
 from wristmimic.rl.storage import RolloutStorage
+from wristmimic.threads import torch_threads
 
 _clock = time.monotonic
 """The clock of time-based checkpoints (a test can replace it)."""
@@ -154,7 +155,7 @@ class Runner:
                     if self.cfg.final_std > 0.0:  # the sigma schedule (a fixed sigma: a buffer, saved with the policy)
                         self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
                     episode_row = self.collect()
-                    losses = self.alg.update(self.storage, self.gen)
+                    losses = self.update()
                     self._average_deployed(self.iteration + 1)
                     self._collect_write()  # the previous iteration's checkpoint: on disk before this one's row
                     self.check_finite(self.iteration + 1, losses)
@@ -328,7 +329,20 @@ class Runner:
                 raise self._error(f"{name} is non-finite after the update", iteration)
 
     def collect(self) -> dict[str, float]:
-        """One rollout of ``horizon`` steps into the storage, then GAE; returns the iteration's episode stats."""
+        """One rollout of ``horizon`` steps into the storage, then GAE; returns the iteration's episode stats.
+
+        The policy runs on the environment's ``math_threads`` torch threads (1), as its math does: the physics
+        threads hold the cores between the steps, and more OpenMP threads only contend with them."""
+        with torch_threads(self.env.cfg.math_threads):
+            return self._collect()
+
+    def update(self) -> dict[str, float]:
+        """The PPO update of the collected rollout (returns its losses), on as many torch threads as the physics
+        has (``--nthread``; they are idle meanwhile). The results do not depend on the thread count."""
+        with torch_threads(getattr(self.env.backend, "nthread", None)):
+            return self.alg.update(self.storage, self.gen)
+
+    def _collect(self) -> dict[str, float]:
         pi = self.policy
         for t in range(self.cfg.horizon):
             self._obs_ok[t] = self.obs.sum(-1).isfinite()  # a NaN or inf propagates; no host sync here
