@@ -26,7 +26,11 @@ class Settings:
     backend_options: dict = field(default_factory=dict)
 
 
-BEFORE = Settings("before (7b14b30 physics)", SceneConfig(timestep=1.0 / 120.0, substeps=4), {"exact_contacts": True})
+BEFORE = Settings(
+    "before (7b14b30 physics)",
+    SceneConfig(timestep=1.0 / 120.0, substeps=4, solver="newton", iterations=100),
+    {"exact_contacts": True},
+)
 NOW = Settings("now (defaults)", SceneConfig(), {})
 
 

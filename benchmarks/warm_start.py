@@ -68,7 +68,7 @@ def main() -> None:
     ap.add_argument("--worlds", type=int, default=64)
     ap.add_argument("--steps", type=int, default=16, help="Control steps per world.")
     args = ap.parse_args()
-    cfg = SceneConfig()
+    cfg = SceneConfig(solver="newton", iterations=100)  # Newton's iterations depend on the warm start; PGS runs all 20
     with tempfile.TemporaryDirectory() as tmp:
         pairs = [(args.dataset, args.sequence)] if args.dataset else _default_datasets(Path(tmp))
         for path, sid in pairs:

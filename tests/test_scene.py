@@ -15,7 +15,9 @@ from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.intermimic import convert_intermimic
 from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
 from wristmimic.format import open_dataset
+from wristmimic.rl.config import to_jsonable
 from wristmimic.scene import SceneConfig, build_scene, finger_ranges, gain_groups, scene_config_from_dict
+from wristmimic.sim.warp_backend import newton_for_pgs
 
 from synthetic import write_intermimic_folder, write_parahome_folder
 
@@ -122,23 +124,32 @@ def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: t
     from wristmimic.errors import InputError
 
     with open_dataset(synth_files[0]) as ds:
-        o = build_scene(ds, "sub1_box_000").model.opt  # defaults: MuJoCo's own
+        o = build_scene(ds, "sub1_box_000").model.opt  # defaults: PGS, 20 iterations
         assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone) == (
-            mujoco.mjtSolver.mjSOL_NEWTON,
-            100,
+            mujoco.mjtSolver.mjSOL_PGS,
+            20,
             50,
             1e-8,
             mujoco.mjtCone.mjCONE_PYRAMIDAL,
         )
-        cfg = SceneConfig(solver="pgs", iterations=20, ls_iterations=5, tolerance=1e-6, cone="elliptic")
+        # a run recorded before the solver fields existed stepped with MuJoCo's Newton, 100 iterations
+        recorded = {k: v for k, v in to_jsonable(SceneConfig()).items() if k not in ("solver", "iterations")}
+        o = build_scene(ds, "sub1_box_000", scene_config_from_dict(recorded)).model.opt
+        assert (o.solver, o.iterations) == (mujoco.mjtSolver.mjSOL_NEWTON, 100)
+        cfg = SceneConfig(solver="newton", iterations=7, ls_iterations=5, tolerance=1e-6, cone="elliptic")
         o = build_scene(ds, "sub1_box_000", cfg).model.opt
         assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone) == (
-            mujoco.mjtSolver.mjSOL_PGS,
-            20,
+            mujoco.mjtSolver.mjSOL_NEWTON,
+            7,
             5,
             1e-6,
             mujoco.mjtCone.mjCONE_ELLIPTIC,
         )
+        newton = newton_for_pgs(build_scene(ds, "sub1_box_000").model)  # what the Warp backend steps
+        assert (newton.opt.solver, newton.opt.iterations) == (mujoco.mjtSolver.mjSOL_NEWTON, 100)
+        assert build_scene(ds, "sub1_box_000").model.opt.solver == mujoco.mjtSolver.mjSOL_PGS
+        kept = build_scene(ds, "sub1_box_000", cfg).model
+        assert newton_for_pgs(kept) is kept
         for bad in (SceneConfig(solver="jacobi"), SceneConfig(cone="round"), SceneConfig(iterations=0)):
             with pytest.raises(InputError, match="scene_config"):
                 build_scene(ds, "sub1_box_000", bad)

@@ -20,6 +20,7 @@ from wristmimic.convert.common import ConvertOptions  # noqa: E402
 from wristmimic.convert.intermimic import convert_intermimic  # noqa: E402
 from wristmimic.env.config import EnvConfig  # noqa: E402
 from wristmimic.env.vec_env import WristMimicEnv  # noqa: E402
+from wristmimic.scene import SceneConfig  # noqa: E402
 
 from synthetic import tiny_ppo_toml, write_intermimic_folder  # noqa: E402
 
@@ -46,8 +47,9 @@ CFG = EnvConfig(action_mode="absolute")
 
 
 def _pair(dataset: Path, seq: str, n: int, device: str) -> tuple[WristMimicEnv, WristMimicEnv]:
-    cpu = WristMimicEnv.from_file(dataset, seq, n, CFG, seed=3, nthread=1)
-    warp = WristMimicEnv.from_file(dataset, seq, n, CFG, seed=3, backend="warp", backend_options={"device": device})
+    sc = SceneConfig(solver="newton", iterations=100)  # Warp has no PGS (the CPU default)
+    cpu = WristMimicEnv.from_file(dataset, seq, n, CFG, sc, seed=3, nthread=1)
+    warp = WristMimicEnv.from_file(dataset, seq, n, CFG, sc, seed=3, backend="warp", backend_options={"device": device})
     return cpu, warp
 
 
@@ -156,6 +158,8 @@ def test_train_resume_and_evaluate_commands_on_the_warp_backend(synthetic: tuple
     run = start_run(spec, tmp_path / "run", progress=False).run_dir
     config = json.loads((run / "config.json").read_text())
     assert config["physics"] == {"backend": "warp", "device": "cpu"}
+    # Warp has no PGS (the CPU default): the run records the Newton it stepped with
+    assert (config["scene_config"]["solver"], config["scene_config"]["iterations"]) == ("newton", 100)
     assert "warp_qpos" in load_checkpoint(run)["env"]
     r = resume_run(run, max_frames=96, progress=False)
     assert (r.status, r.iteration) == ("finished", 3)

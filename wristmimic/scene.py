@@ -57,10 +57,17 @@ class SceneConfig:
     """Physics steps per 30 Hz control step."""
     integrator: str = "implicitfast"
     """Euler integrates the light fingers' actuator damping explicitly and explodes at dt >= 1/240."""
-    solver: str = "newton"
-    """MuJoCo constraint solver: newton, cg or pgs (``benchmarks/physics_sweep.py`` measures each)."""
-    iterations: int = 100
-    """Solver iterations at most (MuJoCo's default; Newton stops at ``tolerance``, ~3 per step on OMOMO)."""
+    solver: str = "pgs"
+    """MuJoCo constraint solver: pgs, newton or cg (``benchmarks/physics_sweep.py`` measures each). PGS with 20
+    iterations since 2026-12-06 (Newton with 100 before, MuJoCo's default; runs record theirs): 1.27-1.29x the raw
+    rate of Newton on sub2_largetable_000 and s110_move_kettle, training 1.24-1.33x (``benchmarks/train_throughput.py
+    --compare``), and the CPU recipe's policies succeed at least as often (issue #15's fidelity gate, 256 quick
+    trials at 400k frames: synth_default s0 100 %, synth_turn s1 99.2 % and s2 0 %, as with Newton; synth_high_table
+    s0 / s1 100 / 99.6 % against 83.6 / 77.7 %); zero-action replay of both real scenes ends within 0-4 frames of
+    Newton's. MuJoCo Warp has no PGS: a ``--backend warp`` run uses Newton with 100 iterations instead (recorded in
+    its ``config.json``)."""
+    iterations: int = 20
+    """Solver iterations at most (PGS runs all of them; Newton stops at ``tolerance``, ~3 per step on OMOMO)."""
     ls_iterations: int = 50
     """Line-search iterations at most (Newton and CG)."""
     tolerance: float = 1e-8
@@ -239,12 +246,15 @@ geom's friction governs a contact; equal priorities take the larger of the two."
 
 
 LEGACY_SCENE_DEFAULTS: dict = {
+    "solver": "newton",
+    "iterations": 100,
     "hand_condim": 3,
     "hand_torsional_friction": 0.005,
     "contact_condim": None,
     "density": 1000.0,
 }
-"""What a run's recorded ``scene_config`` meant when it predates a field (sliding friction only on the hands)."""
+"""What a run's recorded ``scene_config`` meant when it predates a field (sliding friction only on the hands, MuJoCo's
+Newton solver)."""
 
 
 def scene_config_from_dict(data: dict) -> SceneConfig:

@@ -192,6 +192,7 @@ def start_run(
         raise InputError(None, "variant", f"unknown variant {spec.variant!r}", f"one of {', '.join(VARIANTS)}")
     if spec.backend not in BACKENDS:
         raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
+    spec = _for_backend(spec)
     env_cfg = spec.env or preset_env(spec.preset, spec.variant)
     source = _init_source(spec)
     config = _config_dict(spec, env_cfg, sha256_file(data), None if source is None else source[2])
@@ -217,6 +218,15 @@ def start_run(
     finally:
         runner.env.close()
     return TrainResult(run_dir, status, runner.iteration, runner.frames)
+
+
+def _for_backend(spec: TrainSpec) -> TrainSpec:
+    """MuJoCo Warp has no PGS solver: a ``warp`` run of a PGS scene (the default) uses Newton with 100 iterations
+    (MuJoCo's defaults, the CPU default before 2026-12-06); ``config.json`` records what ran."""
+    sc = spec.scene_config
+    if spec.backend == "warp" and sc.solver == "pgs":
+        return replace(spec, scene_config=replace(sc, solver="newton", iterations=100))
+    return spec
 
 
 INIT_WEIGHTS = ("deployed", "latest")

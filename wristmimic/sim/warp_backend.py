@@ -17,6 +17,7 @@ Needs the ``warp`` extra: ``pip install 'wristmimic[warp]'`` (``mujoco-warp``, w
 
 from __future__ import annotations
 
+import copy
 import time
 from typing import Any
 
@@ -63,6 +64,17 @@ def contact_capacity(model: mujoco.MjModel) -> tuple[int, int]:
     return nconmax, 4 * nconmax + int(np.sum(model.jnt_limited))
 
 
+def newton_for_pgs(model: mujoco.MjModel) -> mujoco.MjModel:
+    """``model``, or a copy stepped by Newton with 100 iterations where it uses PGS (the CPU default since
+    2026-12-06), which MuJoCo Warp does not have. ``wristmimic train --backend warp`` records Newton in the run's
+    ``config.json``; a CPU run's policy evaluated on Warp meets Newton instead of the PGS it trained with."""
+    if model.opt.solver != mujoco.mjtSolver.mjSOL_PGS:
+        return model
+    m = copy.deepcopy(model)
+    m.opt.solver, m.opt.iterations = mujoco.mjtSolver.mjSOL_NEWTON, 100
+    return m
+
+
 class WarpBackend:
     """``num_worlds`` worlds of ``model`` in MuJoCo Warp on ``device`` ("cuda", "cuda:1", "cpu")."""
 
@@ -77,6 +89,7 @@ class WarpBackend:
     ):
         wp, mjw = import_warp()
         self._wp, self._mjw = wp, mjw
+        model = newton_for_pgs(model)
         self.model = model
         self.num_worlds = int(num_worlds)
         self._wpdev = wp.get_device(device or default_device())
