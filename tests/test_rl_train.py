@@ -116,9 +116,16 @@ def test_policy_steps_on_one_torch_thread_and_the_update_on_the_physics_threads(
 
 
 def test_results_do_not_depend_on_the_thread_counts(dataset: Path, tmp_path: Path) -> None:
+    """Physics threads (--nthread) and the process's torch threads (OMP_NUM_THREADS): the orthogonal initialisation
+    of the recipe's widths differed in its last bits between 1 and 2 torch threads before it ran on one."""
     wide = {"actor_hidden": (512, 256), "critic_hidden": (512, 256)}  # the CPU recipe's widths
-    for n in (1, 2):
-        start_run(_spec(dataset, 2, **wide), tmp_path / str(n), nthread=n, progress=False)
+    before = torch.get_num_threads()
+    try:
+        for n in (1, 2):
+            torch.set_num_threads(n)
+            start_run(_spec(dataset, 2, **wide), tmp_path / str(n), nthread=n, progress=False)
+    finally:
+        torch.set_num_threads(before)
     assert _rows(tmp_path / "1") == _rows(tmp_path / "2")
     assert _same_params(_params(tmp_path / "1"), _params(tmp_path / "2"))
 

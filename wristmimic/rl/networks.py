@@ -8,6 +8,8 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
+from wristmimic.threads import torch_threads
+
 
 class ObsNormalizer(nn.Module):
     """Running mean / variance of observations (Chan et al. parallel update); its state is in buffers, so it is
@@ -49,7 +51,8 @@ def mlp(in_size: int, hidden: Sequence[int], out_size: int, out_gain: float) -> 
 
 
 def _init(layer: nn.Linear, gain: float) -> nn.Linear:
-    nn.init.orthogonal_(layer.weight, gain)
+    with torch_threads(1):  # LAPACK's QR rounds differently on more threads: the same seed, the same weights
+        nn.init.orthogonal_(layer.weight, gain)
     nn.init.zeros_(layer.bias)
     return layer
 
