@@ -32,6 +32,8 @@ BEFORE = Settings(
     {"exact_contacts": True},
 )
 NOW = Settings("now (defaults)", SceneConfig(), {})
+PGS = Settings("pgs 20 it", SceneConfig(solver="pgs", iterations=20), {})
+"""PGS with 20 iterations: 1.24-1.33x training frames/s, but it fails issue #15's fidelity gate (``SceneConfig.solver``)."""
 
 
 def raw_step_rate(

@@ -1,6 +1,6 @@
 """Physics settings by measurement (issue #15, "a higher ceiling"): the raw control-frame rate of candidate
-solver / timestep settings beside Newton with 100 iterations at 1/120 s x 4 (the defaults before 2026-12-06; today's
-defaults are PGS with 20 iterations), in the same process, with a fidelity check for each.
+solver / timestep settings beside the defaults (Newton with 100 iterations at 1/120 s x 4), in the same process,
+with a fidelity check for each.
 
 Usage:  python benchmarks/physics_sweep.py [--dataset datasets/omomo.h5 --sequence sub2_largetable_000]
 
@@ -9,7 +9,7 @@ candidate :class:`~wristmimic.scene.SceneConfig` it prints:
 
 - raw control frames/s: plain ``mujoco.rollout`` on all cores (``physics_settings.raw_step_rate``) from 256
   worlds' states reached by the training environment under that setting (small random residual actions,
-  8 steps from failure-weighted starts), divided by the setting's substeps; and the ratio to the first row (Newton before);
+  8 steps from failure-weighted starts), divided by the setting's substeps; and the ratio to the defaults;
 - mean contacts and Newton/CG/PGS iterations per physics step at those states;
 - fidelity: open-loop PD replay of the reference (no policy) for 30 frames from frame 0: root and wrist position
   error at frame 30 (cm). It shows gross changes only: a policy's success rate is the real gate.
@@ -39,12 +39,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from env_step import _default_datasets  # noqa: E402
 from physics_settings import raw_step_rate  # noqa: E402
 
-NEWTON = SceneConfig(solver="newton", iterations=100)  # MuJoCo's defaults: the scene default before 2026-12-06
+NEWTON = SceneConfig(solver="newton", iterations=100)  # MuJoCo's defaults and the scene's
 CANDIDATES: dict[str, SceneConfig] = {
-    "newton 100 it, 1/120 x 4 (before)": NEWTON,
+    "newton 100 it, 1/120 x 4 (defaults)": NEWTON,
     "newton tol 1e-6": replace(NEWTON, tolerance=1e-6),
     "newton 4 it, 8 ls, tol 1e-6": replace(NEWTON, iterations=4, ls_iterations=8, tolerance=1e-6),
-    "pgs 20 it (defaults)": SceneConfig(),
+    "pgs 20 it": replace(NEWTON, solver="pgs", iterations=20),
     "cg": replace(NEWTON, solver="cg"),
     "elliptic cone": replace(NEWTON, cone="elliptic"),
     "newton, 1/90 x 3": replace(NEWTON, timestep=1 / 90, substeps=3),

@@ -1,7 +1,7 @@
 """PPO training throughput against the raw MuJoCo step rate of the same scene, measured in the same run.
 
 Usage:  python benchmarks/train_throughput.py [--dataset datasets/omomo.h5 --sequence sub2_largetable_000]
-                                              [--preset cpu] [--iterations 5] [--compare]
+                                              [--preset cpu] [--iterations 5] [--compare] [--pgs]
 
 Prints the raw ``mj_step`` rate of the scene (plain ``mujoco.rollout`` on all cores from the training worlds'
 states and controls, the preset's number of worlds, no extra sensor pass: see ``physics_settings.py``), then for
@@ -9,7 +9,7 @@ the preset: training frames/s (collect + update), the split between rollout coll
 the ratio training frames/s / raw control frames/s. Target (issue #15): >= 0.7 on 2 cores.
 
 ``--compare`` also runs the physics settings before issue #15 in the same process and prints the ratio of the two
-training rates.
+training rates; ``--pgs`` also runs PGS with 20 iterations (see ``SceneConfig.solver``).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from wristmimic.rl.config import preset, preset_env
 from wristmimic.rl.runner import Runner
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from physics_settings import BEFORE, NOW, Settings, dataset_or_shared_omomo, raw_step_rate  # noqa: E402
+from physics_settings import BEFORE, NOW, PGS, Settings, dataset_or_shared_omomo, raw_step_rate  # noqa: E402
 
 
 def bench(path: Path, sid: str, preset_name: str, iterations: int, num_envs: int | None, settings: Settings) -> float:
@@ -78,6 +78,7 @@ def main() -> None:
     ap.add_argument("--num-envs", type=int)
     ap.add_argument("--iterations", type=int, default=5)
     ap.add_argument("--compare", action="store_true", help="also run the physics settings before issue #15")
+    ap.add_argument("--pgs", action="store_true", help="also run PGS with 20 iterations (faster; fails the gate)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         path = dataset_or_shared_omomo(args.dataset, args.sequence, tmp)
@@ -85,6 +86,9 @@ def main() -> None:
         if args.compare:
             before = bench(path, args.sequence, args.preset, args.iterations, args.num_envs, BEFORE)
             print(f"now / before: training frames/s x{now / before:.2f}")
+        if args.pgs:
+            pgs = bench(path, args.sequence, args.preset, args.iterations, args.num_envs, PGS)
+            print(f"pgs / now: training frames/s x{pgs / now:.2f}")
 
 
 if __name__ == "__main__":

@@ -124,16 +124,17 @@ def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: t
     from wristmimic.errors import InputError
 
     with open_dataset(synth_files[0]) as ds:
-        o = build_scene(ds, "sub1_box_000").model.opt  # defaults: PGS, 20 iterations
+        o = build_scene(ds, "sub1_box_000").model.opt  # defaults: MuJoCo's own
         assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone) == (
-            mujoco.mjtSolver.mjSOL_PGS,
-            20,
+            mujoco.mjtSolver.mjSOL_NEWTON,
+            100,
             50,
             1e-8,
             mujoco.mjtCone.mjCONE_PYRAMIDAL,
         )
         # a run recorded before the solver fields existed stepped with MuJoCo's Newton, 100 iterations
-        recorded = {k: v for k, v in to_jsonable(SceneConfig()).items() if k not in ("solver", "iterations")}
+        recorded = {k: v for k, v in to_jsonable(SceneConfig(solver="pgs", iterations=20)).items()}
+        recorded = {k: v for k, v in recorded.items() if k not in ("solver", "iterations")}
         o = build_scene(ds, "sub1_box_000", scene_config_from_dict(recorded)).model.opt
         assert (o.solver, o.iterations) == (mujoco.mjtSolver.mjSOL_NEWTON, 100)
         cfg = SceneConfig(solver="newton", iterations=7, ls_iterations=5, tolerance=1e-6, cone="elliptic")
@@ -145,9 +146,10 @@ def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: t
             1e-6,
             mujoco.mjtCone.mjCONE_ELLIPTIC,
         )
-        newton = newton_for_pgs(build_scene(ds, "sub1_box_000").model)  # what the Warp backend steps
+        pgs = build_scene(ds, "sub1_box_000", SceneConfig(solver="pgs", iterations=20)).model
+        newton = newton_for_pgs(pgs)  # what the Warp backend steps
         assert (newton.opt.solver, newton.opt.iterations) == (mujoco.mjtSolver.mjSOL_NEWTON, 100)
-        assert build_scene(ds, "sub1_box_000").model.opt.solver == mujoco.mjtSolver.mjSOL_PGS
+        assert (pgs.opt.solver, pgs.opt.iterations) == (mujoco.mjtSolver.mjSOL_PGS, 20)
         kept = build_scene(ds, "sub1_box_000", cfg).model
         assert newton_for_pgs(kept) is kept
         for bad in (SceneConfig(solver="jacobi"), SceneConfig(cone="round"), SceneConfig(iterations=0)):

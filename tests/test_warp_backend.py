@@ -47,7 +47,7 @@ CFG = EnvConfig(action_mode="absolute")
 
 
 def _pair(dataset: Path, seq: str, n: int, device: str) -> tuple[WristMimicEnv, WristMimicEnv]:
-    sc = SceneConfig(solver="newton", iterations=100)  # Warp has no PGS (the CPU default)
+    sc = SceneConfig(solver="newton", iterations=100)  # Warp has no PGS
     cpu = WristMimicEnv.from_file(dataset, seq, n, CFG, sc, seed=3, nthread=1)
     warp = WristMimicEnv.from_file(dataset, seq, n, CFG, sc, seed=3, backend="warp", backend_options={"device": device})
     return cpu, warp
@@ -158,7 +158,7 @@ def test_train_resume_and_evaluate_commands_on_the_warp_backend(synthetic: tuple
     run = start_run(spec, tmp_path / "run", progress=False).run_dir
     config = json.loads((run / "config.json").read_text())
     assert config["physics"] == {"backend": "warp", "device": "cpu"}
-    # Warp has no PGS (the CPU default): the run records the Newton it stepped with
+    # Warp has no PGS: a warp run of a PGS scene records the Newton it stepped with
     assert (config["scene_config"]["solver"], config["scene_config"]["iterations"]) == ("newton", 100)
     assert "warp_qpos" in load_checkpoint(run)["env"]
     r = resume_run(run, max_frames=96, progress=False)

@@ -57,17 +57,17 @@ class SceneConfig:
     """Physics steps per 30 Hz control step."""
     integrator: str = "implicitfast"
     """Euler integrates the light fingers' actuator damping explicitly and explodes at dt >= 1/240."""
-    solver: str = "pgs"
-    """MuJoCo constraint solver: pgs, newton or cg (``benchmarks/physics_sweep.py`` measures each). PGS with 20
-    iterations since 2026-12-06 (Newton with 100 before, MuJoCo's default; runs record theirs): 1.27-1.29x the raw
-    rate of Newton on sub2_largetable_000 and s110_move_kettle, training 1.24-1.33x (``benchmarks/train_throughput.py
-    --compare``), and the CPU recipe's policies succeed at least as often (issue #15's fidelity gate, 256 quick
-    trials at 400k frames: synth_default s0 100 %, synth_turn s1 99.2 % and s2 0 %, as with Newton; synth_high_table
-    s0 / s1 100 / 99.6 % against 83.6 / 77.7 %); zero-action replay of both real scenes ends within 0-4 frames of
-    Newton's. MuJoCo Warp has no PGS: a ``--backend warp`` run uses Newton with 100 iterations instead (recorded in
-    its ``config.json``)."""
-    iterations: int = 20
-    """Solver iterations at most (PGS runs all of them; Newton stops at ``tolerance``, ~3 per step on OMOMO)."""
+    solver: str = "newton"
+    """MuJoCo constraint solver: newton, cg or pgs (``benchmarks/physics_sweep.py`` measures each). PGS with 20
+    iterations trains 1.24-1.33x faster on sub2_largetable_000 and s110_move_kettle (``benchmarks/train_throughput.py
+    --compare``) but fails issue #15's fidelity gate (2026-12-06, the recipe of 2026-12-05, 256 quick trials at 400k
+    frames, ``reports/pgs_gate_20261206/``): 8 of 9 synthetic runs succeed as often or more (synth_high_table s0 / s1
+    100 / 99.6 % against Newton's 83.6 / 77.7 %), but synth_default on the 1.55 m humanoid falls to 40.6 % against
+    Newton's 100 % periodic evaluations on the same machine. So Newton stays the default; MuJoCo Warp has no PGS
+    (a PGS scene on ``--backend warp`` steps with Newton, 100 iterations)."""
+    iterations: int = 100
+    """Solver iterations at most (MuJoCo's default; Newton stops at ``tolerance``, ~3 per step on OMOMO; PGS runs
+    all of them)."""
     ls_iterations: int = 50
     """Line-search iterations at most (Newton and CG)."""
     tolerance: float = 1e-8

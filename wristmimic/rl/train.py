@@ -221,8 +221,8 @@ def start_run(
 
 
 def _for_backend(spec: TrainSpec) -> TrainSpec:
-    """MuJoCo Warp has no PGS solver: a ``warp`` run of a PGS scene (the default) uses Newton with 100 iterations
-    (MuJoCo's defaults, the CPU default before 2026-12-06); ``config.json`` records what ran."""
+    """MuJoCo Warp has no PGS solver: a ``warp`` run of a PGS scene uses Newton with 100 iterations (MuJoCo's
+    defaults); ``config.json`` records what ran."""
     sc = spec.scene_config
     if spec.backend == "warp" and sc.solver == "pgs":
         return replace(spec, scene_config=replace(sc, solver="newton", iterations=100))

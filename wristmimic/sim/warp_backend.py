@@ -65,9 +65,9 @@ def contact_capacity(model: mujoco.MjModel) -> tuple[int, int]:
 
 
 def newton_for_pgs(model: mujoco.MjModel) -> mujoco.MjModel:
-    """``model``, or a copy stepped by Newton with 100 iterations where it uses PGS (the CPU default since
-    2026-12-06), which MuJoCo Warp does not have. ``wristmimic train --backend warp`` records Newton in the run's
-    ``config.json``; a CPU run's policy evaluated on Warp meets Newton instead of the PGS it trained with."""
+    """``model``, or a copy stepped by Newton with 100 iterations where it uses PGS (``scene_config.solver``), which
+    MuJoCo Warp does not have. ``wristmimic train --backend warp`` records Newton in the run's ``config.json``; a
+    CPU PGS run's policy evaluated on Warp meets Newton instead of the PGS it trained with."""
     if model.opt.solver != mujoco.mjtSolver.mjSOL_PGS:
         return model
     m = copy.deepcopy(model)
