@@ -325,21 +325,15 @@ def train_job(
     """Start the run in ``run_dir``, or resume it from its checkpoint (``should_stop``: stop after an iteration,
     checkpoint saved). ``nthread`` sets the physics and the torch threads (as a Ray job's CPUs do), so a serial
     and a distributed run of the same job compute the same bits."""
-    import torch
-
     from wristmimic.rl.train import resume_run, start_run
+    from wristmimic.threads import torch_threads
 
     kw: dict[str, Any] = {"nthread": nthread, "progress": progress, "dataset_file": dataset_file}
     kw["should_stop"] = should_stop
-    before = torch.get_num_threads()
-    if nthread:
-        torch.set_num_threads(nthread)
-    try:
+    with torch_threads(nthread):
         if (Path(run_dir) / "checkpoint.pt").exists():
             return resume_run(run_dir, **kw)
         return start_run(spec, run_dir, **kw)
-    finally:
-        torch.set_num_threads(before)
 
 
 def evaluate_job(

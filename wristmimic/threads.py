@@ -17,8 +17,10 @@ import torch
 def torch_threads(n: int | None) -> Iterator[None]:
     """Run the block with ``n`` torch intra-op threads (None or 0: leave the count as it is), then restore it."""
     before = torch.get_num_threads()
-    if n:
-        torch.set_num_threads(int(n))
+    if not n or int(n) == before:  # nested or repeated on the hot path (every env step): nothing to change
+        yield
+        return
+    torch.set_num_threads(int(n))
     try:
         yield
     finally:

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from wristmimic.errors import InputError
+from wristmimic.threads import torch_threads
 from wristmimic.view.tracks import SimTrack
 
 if TYPE_CHECKING:
@@ -91,30 +92,28 @@ def run_rollout(env: WristMimicEnv, actor: Actor, start_frame: int = 0, max_step
         raise InputError(None, "start_frame", f"{start_frame}", f"a frame in [0, {T - 2}]")
     wrapper = KeepStateBeforeReset(env.backend)
     env.backend = wrapper  # type: ignore[assignment]
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # one world: small batches, where extra threads only wait on each other
     try:
-        obs, _ = env.reset(start_frames=torch.full((env.num_worlds,), int(start_frame), dtype=torch.long))
-        states, frames, rewards = [env.sim_state()], [int(start_frame)], [float("nan")]
-        end = "stopped"
-        limit = max_steps if max_steps is not None else T + 1
-        for _ in range(limit):
-            with torch.no_grad():
-                action = actor(obs)
-            obs, reward, terminated, truncated, info = env.step(action)
-            frames.append(int(info["frame"][0]))
-            rewards.append(float(reward[0]))
-            if bool(terminated[0] | truncated[0]):
-                assert wrapper.before_reset is not None
-                with wrapper.showing(wrapper.before_reset):
-                    states.append(env.sim_state())
-                reason = env.reason_name(int(info["termination_reason"][0]))
-                end = f"terminated: {reason}" if bool(terminated[0]) else "truncated"
-                break
-            states.append(env.sim_state())
+        with torch_threads(1):  # one world: small batches, where extra threads only wait on each other
+            obs, _ = env.reset(start_frames=torch.full((env.num_worlds,), int(start_frame), dtype=torch.long))
+            states, frames, rewards = [env.sim_state()], [int(start_frame)], [float("nan")]
+            end = "stopped"
+            limit = max_steps if max_steps is not None else T + 1
+            for _ in range(limit):
+                with torch.no_grad():
+                    action = actor(obs)
+                obs, reward, terminated, truncated, info = env.step(action)
+                frames.append(int(info["frame"][0]))
+                rewards.append(float(reward[0]))
+                if bool(terminated[0] | truncated[0]):
+                    assert wrapper.before_reset is not None
+                    with wrapper.showing(wrapper.before_reset):
+                        states.append(env.sim_state())
+                    reason = env.reason_name(int(info["termination_reason"][0]))
+                    end = f"terminated: {reason}" if bool(terminated[0]) else "truncated"
+                    break
+                states.append(env.sim_state())
     finally:
         env.backend = wrapper.inner  # type: ignore[assignment]
-        torch.set_num_threads(threads)
     return _stack(states, frames, rewards, end)
 
 
