@@ -3,7 +3,8 @@
 Usage:  python scripts/learning_curve.py RUN_DIR -o reports/learning_curve_<scene>.png [--smooth 10]
 
 Panels: mean episode length, mean per-step reward and success rate against environment frames; faint lines are
-per-iteration values, bold lines a moving average. The success panel shows the training success rate (episodes
+per-iteration values, bold lines a moving average. The episode-length panel also shows, as points, how many frames
+the periodic evaluation's frame-0 trials last, and (dotted, right axis) the training-only object controller's gain. The success panel shows the training success rate (episodes
 that started at frame 0 and reached the last frame) and, as points, the periodic evaluation's
 ``eval/success_rate`` (frame-0 trials of the quick protocol, as ``wristmimic evaluate`` runs them) and, where logged,
 ``eval/strict_success_rate`` (the object within 10 cm of its reference in every frame).
@@ -49,6 +50,8 @@ def plot(run_dir: Path, out: Path, smooth: int) -> Path:
             if "eval/strict_success_rate" in m and ev["eval/strict_success_rate"].notna().any():
                 ax.plot(ev["frames"], ev["eval/strict_success_rate"], "s--", ms=3, label="strict (object within 10 cm)")
             ax.legend(loc="upper left", fontsize=8)
+        if col == "episode_length_mean":
+            _episode_extras(ax, m)
         ax.set_xlabel("environment frames")
         ax.xaxis.set_major_formatter(EngFormatter(sep=""))  # 200k, 1M: no overlapping tick labels
         ax.set_ylabel(label)
@@ -59,6 +62,21 @@ def plot(run_dir: Path, out: Path, smooth: int) -> Path:
         fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
     return out
+
+
+def _episode_extras(ax: plt.Axes, m: pd.DataFrame) -> None:
+    """The periodic evaluation's frames completed per frame-0 trial (points) and, on a right-hand axis, the
+    training-only object controller's gain where the run logs a nonzero one: where a scene's frame-0 trials end
+    says more than a success rate of 0, and the gain says how much of the object's motion the policy was given."""
+    if "eval/frames_completed" in m and m["eval/frames_completed"].notna().any():
+        ev = m[m["eval/frames_completed"].notna()]
+        ax.plot(ev["frames"], ev["eval/frames_completed"], "o-", ms=3, label="evaluation: frames per frame-0 trial")
+        ax.legend(loc="upper left", fontsize=8)
+    if "curriculum/object_gain" in m and (m["curriculum/object_gain"].astype(float) > 0).any():
+        right = ax.twinx()
+        right.plot(m["frames"], m["curriculum/object_gain"].astype(float), color="grey", ls=":", lw=1.5)
+        right.set_ylim(0.0, 1.05)
+        right.set_ylabel("object controller gain (dotted)", fontsize=8)
 
 
 def main() -> None:
