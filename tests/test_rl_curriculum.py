@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from wristmimic.env.config import ObjectControllerConfig, RootAssistConfig, variant_config
+from wristmimic.env.config import ObjectControllerConfig, RootAssistConfig, check_env_config, variant_config
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.evaluate.policy import load_eval_policy
 from wristmimic.evaluate.trials import make_env
@@ -137,6 +137,45 @@ def test_training_logs_the_weight_ramp_and_evaluation_never_applies_it(dataset: 
     assert pose == [1.0, 0.0, 0.0, 0.0] and weight == pytest.approx([1.0, 0.8, 0.6, 0.4])
     env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
     assert not env.has_object_controller and env.object_gain == 0.0 and not env.object_weight_gain
+
+
+def test_start_hold_holds_only_mid_clip_starts_and_only_for_its_frames(dataset: Path) -> None:
+    """Start hold: the controller's full wrench on a world reset at a frame > 0, fading to none over
+    start_hold_frames; nothing on frame-0 starts, with the curriculum's gain at zero."""
+    cfg = variant_config("wristmimic", wrist_resets=False)  # no episode ends during the test
+    cfg = replace(cfg, termination=replace(cfg.termination, body_error=9.0, object_error=9.0, contact_lost_frames=999))
+    env = WristMimicEnv.from_file(dataset, SID, 2, cfg, SceneConfig(object_actuators=True))
+    env.reset(start_frames=torch.tensor([0, 10]))
+    env.object_gain = 1.0
+    full = env.object_wrench()  # the wrench at gain 1 in this state
+    env.object_gain, env.object_start_hold = 0.0, 4
+    voc = env._voc_cols.flatten()
+    ctrl = env.prepare_step(torch.zeros(2, env.action_size))[:, voc].reshape(full.shape)
+    assert torch.all(ctrl[0] == 0) and torch.allclose(ctrl[1], full[1]) and ctrl[1].abs().max() > 0
+    gains = []
+    for _ in range(6):
+        gains.append(env.start_hold_gain().tolist())
+        env.step(torch.zeros(2, env.action_size))
+    assert gains == [[0.0, g] for g in (1.0, 0.75, 0.5, 0.25, 0.0, 0.0)]
+    assert torch.all(env.prepare_step(torch.zeros(2, env.action_size))[:, voc] == 0)
+    env.object_gain = 0.5  # the larger of the two gains
+    env.reset(start_frames=torch.tensor([0, 10]))
+    hold = env.start_hold_gain()
+    assert hold.tolist() == [0.0, 1.0] and torch.allclose(env.object_wrench(hold)[1], full[1], atol=1e-5)
+    for bad in (dict(start_hold_frames=-1), dict(enabled=False, start_hold_frames=5)):
+        with pytest.raises(ValueError, match="start_hold_frames"):
+            check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(**bad)))
+
+
+def test_training_records_the_start_hold_and_evaluation_never_applies_it(dataset: Path, tmp_path: Path) -> None:
+    env_cfg = variant_config("wristmimic", object_controller=ObjectControllerConfig(start_hold_frames=6))
+    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 2), env=env_cfg)
+    start_run(spec, tmp_path / "run", progress=False)
+    meta = load_eval_policy(tmp_path / "run").metadata
+    assert meta["env"]["object_controller"]["start_hold_frames"] == 6
+    env = make_env(meta, 2)
+    assert not env.has_object_controller and env.object_start_hold == 0 and env.start_hold_gain() is None
 
 
 def test_training_with_a_state_bank_logs_its_share_and_records_it(dataset: Path, tmp_path: Path) -> None:

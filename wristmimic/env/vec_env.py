@@ -265,6 +265,9 @@ class WristMimicEnv:
         self.object_weight_gain: float | None = None
         """Gain of the controller's weight support (``ObjectControllerConfig.weight_zero_by_frames``); None: the
         same as :attr:`object_gain`."""
+        self.object_start_hold = 0
+        """Frames after a reset at a start frame > 0 during which the object controller holds that world's objects
+        (``ObjectControllerConfig.start_hold_frames``; 0: off). Set by training only."""
         self.root_gain = 0.0
         """Gain of the root assist (0: off; ``EnvConfig.root_assist``). Set by training; needs a scene built with
         ``SceneConfig(root_actuators=True)``."""
@@ -626,8 +629,9 @@ class WristMimicEnv:
         self._ctrl[:, self._act_cols] = ctrl
         if self._delta_cols.numel():
             self._held = torch.where(self.delta_hinges, ctrl, self._held)
-        if self.object_gain > 0.0 or (self.object_weight_gain or 0.0) > 0.0:
-            self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench().flatten(1)
+        hold = self.start_hold_gain()
+        if self.object_gain > 0.0 or (self.object_weight_gain or 0.0) > 0.0 or hold is not None:
+            self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench(hold).flatten(1)
         if self.root_gain > 0.0:
             self._ctrl[:, self._rac_cols] = self.root_wrench()
         return self._ctrl
@@ -675,9 +679,18 @@ class WristMimicEnv:
                 sq = self._point_sq_dists(s)
         return self._observe(s, sq), reward, terminated, truncated, info
 
-    def object_wrench(self) -> torch.Tensor:
+    def start_hold_gain(self) -> torch.Tensor | None:
+        """(N,) the object controller's gain that :attr:`object_start_hold` gives each world this step: 1 -
+        steps / object_start_hold after a reset at a frame > 0, else 0; None when off."""
+        if self.object_start_hold <= 0:
+            return None
+        hold = (1.0 - self.steps.to(torch.float32) / self.object_start_hold).clamp(min=0.0)
+        return hold * (self.start > 0)
+
+    def object_wrench(self, hold: torch.Tensor | None = None) -> torch.Tensor:
         """(N, O, 6) virtual object controller: world force and local torque pulling each dynamic object toward
-        its reference at the frame being stepped to, times :attr:`object_gain` (gravity compensated)."""
+        its reference at the frame being stepped to, times :attr:`object_gain` (gravity compensated); ``hold``
+        (N,): per-world gains that raise it (:meth:`start_hold_gain`)."""
         if not self.has_object_controller:
             raise RuntimeError("object_gain > 0 needs a scene built with SceneConfig(object_actuators=True)")
         c, r = self.cfg.object_controller, self.ref
@@ -688,10 +701,15 @@ class WristMimicEnv:
         pd = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin)
         rot = quat_to_rotvec(quat_mul(quat_conj(quat), r.obj_quat[f]))  # local frame
         alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)
-        if self.object_weight_gain is None:
-            return self.object_gain * torch.cat([self._obj_mass * (pd + self._gravity), self._obj_inertia * alpha], -1)
-        acc = self.object_gain * pd + self.object_weight_gain * self._gravity
-        return torch.cat([self._obj_mass * acc, self.object_gain * self._obj_inertia * alpha], -1)
+        gain: float | torch.Tensor = self.object_gain
+        weight: float | torch.Tensor | None = self.object_weight_gain
+        if hold is not None:
+            gain = hold.clamp(min=self.object_gain)[:, None, None]
+            weight = None if weight is None else hold.clamp(min=weight)[:, None, None]
+        if weight is None:
+            return gain * torch.cat([self._obj_mass * (pd + self._gravity), self._obj_inertia * alpha], -1)
+        acc = gain * pd + weight * self._gravity
+        return torch.cat([self._obj_mass * acc, gain * self._obj_inertia * alpha], -1)
 
     def root_wrench(self) -> torch.Tensor:
         """(N, 6) root assist: world force and local torque pulling the humanoid's root toward the reference root

@@ -113,6 +113,10 @@ class Runner:
         self._weight_ramp = env.cfg.object_controller.enabled and env.cfg.object_controller.weight_zero_by_frames > 0
         if self._weight_ramp:
             env.object_weight_gain = self.curriculum.weight_gain(0)
+        hold = env.cfg.object_controller.start_hold_frames
+        if hold > 0 and not env.has_object_controller:
+            raise ValueError("object_controller.start_hold_frames needs a training scene with object actuators")
+        env.object_start_hold = hold
         self._root_assist = env.cfg.root_assist.enabled
         if self._root_assist and not env.has_root_assist:
             raise ValueError("the root assist needs a training scene with SceneConfig(root_actuators=True)")
