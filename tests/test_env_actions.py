@@ -173,21 +173,24 @@ def test_delta_fingers_hold_the_start_pose_and_move_by_the_scale_each_step(datas
 
 
 @pytest.mark.parametrize(
-    "mode, gravity, fingers",
+    "mode, gravity, fingers, synergy",
     [
-        ("residual", False, "absolute"),
-        ("residual", True, "absolute"),
-        ("absolute", False, "absolute"),
-        ("residual", False, "delta"),
-        ("residual", False, "range"),
+        ("residual", False, "absolute", 0.0),
+        ("residual", True, "absolute", 0.0),
+        ("absolute", False, "absolute", 0.0),
+        ("residual", False, "delta", 0.0),
+        ("residual", False, "range", 0.0),
+        ("residual", False, "absolute", 1.0),
     ],
 )
 def test_train_evaluate_and_view_map_actions_the_same_way(
-    dataset: Path, tmp_path: Path, mode: str, gravity: bool, fingers: str
+    dataset: Path, tmp_path: Path, mode: str, gravity: bool, fingers: str, synergy: float
 ) -> None:
     from wristmimic.evaluate.policy import load_eval_policy
 
-    env_cfg = variant_config("wristmimic", action_mode=mode, gravity_feedforward=gravity, finger_action=fingers)
+    env_cfg = variant_config(
+        "wristmimic", action_mode=mode, gravity_feedforward=gravity, finger_action=fingers, finger_synergy=synergy
+    )
     ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
     spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32), env=env_cfg)
     start_run(spec, tmp_path / "run", progress=False)
@@ -202,7 +205,74 @@ def test_train_evaluate_and_view_map_actions_the_same_way(
     for env in (eval_env, view_env):
         env.reset(start_frames=frames[: env.num_worlds])
         assert env.cfg.action_mode == mode and env.cfg.gravity_feedforward == gravity
-        assert env.cfg.finger_action == fingers
+        assert env.cfg.finger_action == fingers and env.cfg.finger_synergy == synergy
+        assert env.action_size == env.num_hinges + (2 if synergy else 0) == policy.policy.action_size
         assert not env.has_object_controller  # the training-only object controller never reaches them
         n = env.num_worlds
         torch.testing.assert_close(env.action_to_ctrl(a[:n], frames[:n]), want[:n], rtol=0, atol=0)
+
+
+def test_grasp_synergy_adds_one_action_per_hand_that_curls_only_that_hands_fingers(dataset: Path) -> None:
+    from wristmimic.env.config import check_env_config
+    from wristmimic.env.synergy import closure_coefficients
+
+    for bad in ({"finger_synergy": -0.1}, {"finger_synergy": 4.0}, {"finger_synergy": 1.0, "finger_action": "delta"}):
+        with pytest.raises(ValueError, match="finger_synergy"):
+            check_env_config(EnvConfig(**bad))
+    plain, env = _env(dataset), _env(dataset, finger_synergy=0.8)
+    H = env.num_hinges
+    assert plain.action_size == H and env.action_size == H + 2
+    a = torch.linspace(-0.5, 0.5, 3 * H).reshape(3, H)
+    zero = torch.zeros(3, 2)
+    # zero synergy: exactly the targets without it
+    torch.testing.assert_close(env.action_to_ctrl(torch.cat([a, zero], 1)), plain.action_to_ctrl(a), rtol=0, atol=0)
+    c = closure_coefficients(env.scene)
+    fingers = env.finger_actions.numpy()
+    assert np.abs(c[:, ~fingers]).max() == 0.0  # body and wrist hinges never move
+    assert np.abs(c).max(axis=1).tolist() == [1.0, 1.0]
+    roles, skel = env.scene.humanoid.roles, env.scene.skeleton
+    for h, side in enumerate(("left", "right")):
+        on_hand = np.repeat(np.isin(skel.joint_bodies, roles[f"{side}_hand"]), 3)
+        assert (np.abs(c[h]) > 0.5).sum() >= 5 and np.abs(c[h][~on_hand]).max() == 0.0
+        g = zero.clone()
+        g[:, h] = 0.5
+        moved = (env.action_to_ctrl(torch.cat([a, g], 1)) - plain.action_to_ctrl(a)).numpy()
+        base = plain.action_to_ctrl(a).numpy()
+        lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
+        free = (base + 0.4 * c[h] < hi) & (base + 0.4 * c[h] > lo)  # targets the joint ranges do not clip
+        np.testing.assert_allclose(moved[free], np.broadcast_to(0.4 * c[h], moved.shape)[free], atol=1e-6)
+        assert np.abs(moved[:, ~on_hand]).max() == 0.0
+
+
+@pytest.mark.parametrize("source", ["synthetic", "parahome"])
+def test_positive_synergy_moves_every_fingertip_toward_its_palm(dataset: Path, source: str, request) -> None:
+    import mujoco
+
+    from wristmimic.env.synergy import closure_coefficients, palm_normal, tip_point
+
+    if source == "parahome":
+        from wristmimic.format.reader import open_dataset
+        from wristmimic.scene import build_scene
+
+        path = request.getfixturevalue("parahome_h5")
+        with open_dataset(path) as ds:
+            scene = build_scene(ds, ds.sequence_ids[0])
+    else:
+        scene = _env(dataset).scene
+    m, skel, roles = scene.model, scene.skeleton, scene.humanoid.roles
+    c = closure_coefficients(scene)
+    ids = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in skel.body_names])
+
+    def tips_along_normal(amount: float, h: int, side: str) -> np.ndarray:
+        d = mujoco.MjData(m)
+        d.qpos[:] = m.qpos0
+        d.qpos[scene.hinge_qposadr.reshape(-1)] += amount * c[h]
+        mujoco.mj_kinematics(m, d)
+        wrist = [int(w) for w in roles["wrists"] if w in roles[f"{side}_hand"]][0]
+        n = palm_normal(np.array([d.xpos[ids[k]] for k in [*skel.children(wrist), wrist]]), np.array([0, 0, -1.0]))
+        tips = [tip_point(m, d, int(ids[t]), int(ids[skel.parents[t]])) for t in roles[f"{side}_fingertips"]]
+        return (np.array(tips) - d.xpos[ids[wrist]]) @ n
+
+    for h, side in enumerate(("left", "right")):
+        rest, curled = tips_along_normal(0.0, h, side), tips_along_normal(0.3, h, side)
+        assert (curled - rest > 0.003).all(), (side, curled - rest)  # every fingertip >= 3 mm toward the palm

@@ -363,6 +363,11 @@ class EnvConfig:
     sigma 0.1, and saturate for two thirds of the action interval)."""
     finger_delta_scale: float = 0.1
     """rad per unit action per control step of a ``delta`` finger target (a full 1.6 rad closure in 16 steps)."""
+    finger_synergy: float = 0.0
+    """rad; > 0 adds one action per hand (the last two: left, right) that moves every finger hinge's PD target by
+    ``finger_synergy * g * c``: a one-dimensional grasp synergy whose positive direction curls the fingers toward
+    the palm, with closure coefficients ``c`` from the humanoid's geometry, not from a reference
+    (:mod:`wristmimic.env.synergy`). Not with ``finger_action=delta``. 0: off."""
 
 
 LEGACY_ENV_DEFAULTS: dict = {
@@ -405,6 +410,10 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"unknown finger_action {cfg.finger_action!r}; expected one of {', '.join(FINGER_ACTIONS)}")
     if not cfg.finger_delta_scale > 0:
         raise ValueError(f"finger_delta_scale must be > 0, got {cfg.finger_delta_scale}")
+    if not 0.0 <= cfg.finger_synergy <= math.pi:
+        raise ValueError(f"finger_synergy must be in [0, pi] rad, got {cfg.finger_synergy}")
+    if cfg.finger_synergy > 0 and cfg.finger_action == "delta":
+        raise ValueError("finger_synergy works with absolute or range finger actions, not finger_action=delta")
     if not 0.0 <= cfg.grip_squeeze < math.inf:
         raise ValueError(f"grip_squeeze must be a finite force >= 0 N, got {cfg.grip_squeeze}")
     if not 0.0 <= cfg.foot_clearance <= 0.1:

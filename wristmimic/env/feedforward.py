@@ -81,7 +81,7 @@ def optimise_feedforward(env: WristMimicEnv, progress: bool = False) -> torch.Te
     """(T, D) PD-target offsets for ``env``'s scene (zero on finger hinges); ``env`` supplies ``samples`` worlds
     (its own state is overwritten). See the module docstring."""
     cfg = env.cfg.feedforward
-    T, D, N, dev = env.ref.num_frames, env.action_size, env.num_worlds, env.device
+    T, D, N, dev = env.ref.num_frames, env.num_hinges, env.num_worlds, env.device
     kf, H = cfg.knot_frames, cfg.horizon_knots
     K = knot_count(T, kf)
     body = env.residual_hinges.to(dev)
@@ -91,7 +91,7 @@ def optimise_feedforward(env: WristMimicEnv, progress: bool = False) -> torch.Te
     every = torch.ones(N, dtype=torch.bool, device=dev)
     ctrl = torch.zeros(N, env.scene.model.nu, device=dev)
     qpos, qvel = env.reference_state(torch.zeros(1, dtype=torch.long, device=dev))
-    zero = torch.zeros(N, D, device=dev)
+    zero = torch.zeros(N, env.action_size, device=dev)
 
     def rollout(start: int, stop: int, cand: torch.Tensor) -> torch.Tensor:
         """Roll every world from the nominal state at ``start`` to ``stop`` with knots ``cand`` (N, K, D)."""

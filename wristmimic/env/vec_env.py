@@ -42,6 +42,8 @@ from wristmimic.env.rewards import CONSTANTS as REWARD_CONSTANTS
 from wristmimic.env.rewards import RewardInputs, compute_reward, ig_weights, sq_dists
 from wristmimic.env.squeeze import squeeze_offsets
 from wristmimic.env.starts import AdaptiveStarts, StateBank
+from wristmimic.env.synergy import HANDS as SYNERGY_HANDS
+from wristmimic.env.synergy import closure_coefficients
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
 from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_to_matrix, quat_to_rotvec
 from wristmimic.errors import InputError
@@ -221,7 +223,15 @@ class WristMimicEnv:
         """(O, 3) / (O, 4) qpos columns of each dynamic object's position / quaternion."""
         self._obj_lin_v, self._obj_ang_v = self._obj_dof[:, None] + k3, self._obj_dof[:, None] + 3 + k3
         """(O, 3) qvel columns of each dynamic object's linear (world) / angular (local) velocity."""
-        self.action_size = len(self._act_cols)
+        self.num_hinges = len(self._act_cols)
+        """Actuated hinges (3 per joint), the first ``num_hinges`` action dimensions (in ``scene.actuator_ids``
+        order)."""
+        self._synergy: torch.Tensor | None = None
+        """(2, num_hinges) PD-target change per unit of the left / right grasp-synergy action (``finger_synergy``)."""
+        if self.cfg.finger_synergy > 0.0:
+            self._synergy = f32(closure_coefficients(scene) * self.cfg.finger_synergy)
+        self.action_size = self.num_hinges + (0 if self._synergy is None else len(SYNERGY_HANDS))
+        """Policy actions: one per hinge, then one grasp-synergy action per hand when ``finger_synergy`` > 0."""
         # virtual object controller (training only): motors on the objects' free joints, if the scene has them
         m = scene.model
         voc = [
@@ -240,10 +250,10 @@ class WristMimicEnv:
         self._rac_cols = idx(rac if self.has_root_assist else [])
         root_body = int(m.jnt_bodyid[m.actuator_trnid[rac[0], 0]]) if self.has_root_assist else 0
         self._root_mass = float(m.body_subtreemass[root_body])  # the whole humanoid
-        self.feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        self.feedforward = torch.zeros(reference.num_frames, self.num_hinges, device=dev)
         """(T, D) open-loop offsets added to the residual hinges' targets (:mod:`wristmimic.env.feedforward`);
         zero unless a run's optimised offsets are loaded."""
-        self.gravity_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        self.gravity_feedforward = torch.zeros(reference.num_frames, self.num_hinges, device=dev)
         """(T, D) gravity-holding offsets of the residual hinges' targets (``EnvConfig.gravity_feedforward``)."""
         if self.cfg.gravity_feedforward and self.cfg.action_mode == "residual":
             r = reference
@@ -251,10 +261,10 @@ class WristMimicEnv:
                 scene, *(x.detach().cpu().double().numpy() for x in (r.root_pos, r.root_quat, r.joint_angles))
             )
             self.gravity_feedforward = f32(g)
-        self.squeeze_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        self.squeeze_feedforward = torch.zeros(reference.num_frames, self.num_hinges, device=dev)
         """(T, D) offsets of the arms' residual hinges that press both hands into an object held between them
         (``EnvConfig.grip_squeeze``, :mod:`wristmimic.env.squeeze`)."""
-        self.carry_feedforward = torch.zeros(reference.num_frames, self.action_size, device=dev)
+        self.carry_feedforward = torch.zeros(reference.num_frames, self.num_hinges, device=dev)
         """(T, D) offsets of the arm and torso residual hinges that hold up a carried object's weight
         (``EnvConfig.carry_feedforward``, :mod:`wristmimic.env.carry`)."""
         self.eval_info = True
@@ -597,9 +607,12 @@ class WristMimicEnv:
 
     # -- step ----------------------------------------------------------------------------------------------
     def action_to_ctrl(self, action: torch.Tensor, frames: torch.Tensor | None = None) -> torch.Tensor:
-        """Actions in [-1, 1] -> PD targets (rad), clipped to the joint ranges. Residual hinges add
-        ``residual_scale * a`` to the reference angle at ``frames`` (default: the frame being stepped to)."""
+        """Actions in [-1, 1] -> PD targets (rad) of the ``num_hinges`` hinges, clipped to the joint ranges.
+        Residual hinges add ``residual_scale * a`` to the reference angle at ``frames`` (default: the frame being
+        stepped to); the grasp-synergy actions (``finger_synergy``) add their closure to the finger targets."""
         a = action.clamp(-1.0, 1.0)
+        grasp = a[:, self.num_hinges :]
+        a = a[:, : self.num_hinges]
         target = self._offset + self._scale * a
         if self.cfg.action_mode == "residual":
             f = (self.frame + 1 if frames is None else frames).clamp(0, self.ref.num_frames - 1)
@@ -609,6 +622,8 @@ class WristMimicEnv:
             target = torch.where(self.residual_hinges, residual, target)
         if self._delta_cols.numel():
             target = torch.where(self.delta_hinges, self._held + self.cfg.finger_delta_scale * a, target)
+        if self._synergy is not None:
+            target = target + grasp @ self._synergy
         return torch.maximum(torch.minimum(target, self._hi), self._lo)
 
     def step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:

@@ -84,7 +84,7 @@ class StateRecorder:
     def __init__(self, env: WristMimicEnv, emit: Callable[[Records, int, dict[str, np.ndarray]], None]):
         self.env, self.emit = env, emit
         N, T, dev = env.num_worlds, env.ref.num_frames, env.device
-        B, D, O = env.scene.skeleton.num_bodies, env.action_size, len(env.scene.dynamic_objects)
+        B, D, O = env.scene.skeleton.num_bodies, env.num_hinges, len(env.scene.dynamic_objects)
         self._qcols = torch.cat([torch.arange(7, device=dev), env._hinge_qpos])  # root free joint, then hinges
         self._rows = torch.arange(N, device=dev)
 
@@ -99,7 +99,7 @@ class StateRecorder:
             "obj_quat": z(O, 4),
             "contact_force": z(B, 3),
             "touch": z(B, dtype=torch.bool),
-            "actions": z(D),
+            "actions": z(env.action_size),
             "pd_targets": z(D),
         }
         env.on_step = self._on_step

@@ -90,7 +90,9 @@ class Runner:
             cfg.min_log_std,
         ).to(dev)
         if cfg.held_actions == "fingers":
-            self.policy.active.copy_((~env.finger_actions).to(self.policy.active.dtype))
+            held = torch.ones(env.action_size, dtype=torch.bool, device=env.finger_actions.device)
+            held[: env.num_hinges] = env.finger_actions  # the grasp-synergy actions are finger actions too
+            self.policy.active.copy_((~held).to(self.policy.active.dtype))
         self.alg = PPO(self.policy, cfg)
         self.ema_net: ActorCritic | None = None
         """An exponential moving average of ``policy`` (``cfg.deploy_ema`` > 0), else None."""
