@@ -473,3 +473,58 @@ def test_sub2_swing_toe_clears_the_floor_with_foot_clearance(omomo_h5: Path) -> 
     right = 1  # chains are (left, right)
     assert ref[0.0][45:55, right].min() < 0.008
     assert ref[0.02][47:53, right].min() > 0.019 and ref[0.02][:, right].min() > -1e-3
+
+
+def test_object_frame_wrist_targets_ride_with_the_simulated_object_only_for_touching_hands(files) -> None:
+    """``wrist_frame=object``: a hand the reference shows touching the object gets its reference wrist pose carried
+    by the simulated object (rigidly: translation and rotation), the other hand the world reference; the wrist reset
+    and the wrist factors read these targets, so a wrist that moves with a displaced object stays inside them."""
+    from dataclasses import replace
+
+    from wristmimic.env.terminations import WRIST
+    from wristmimic.env.torch_math import quat_angle, quat_mul, quat_rotate
+
+    path, sid = files["smplx"]
+    cfg = variant_config("wristmimic", wrist_frame="object")
+    env = WristMimicEnv.from_file(path, sid, num_worlds=2, config=cfg, seed=0, nthread=1)
+    f = env.ref.num_frames // 2
+    env.reset(start_frames=torch.tensor([f, f]))
+    s, rf = env.sim_state(), env.ref_frame(env.frame)
+    rf = replace(rf, hand=torch.ones_like(rf.hand))  # both hands touching in both worlds
+    w = env.sets.wrists
+    pos, quat = env.wrist_targets(s, rf)
+    torch.testing.assert_close(pos, rf.body_pos[:, w], atol=2e-5, rtol=0)  # object on its reference: no change
+    assert quat_angle(quat, rf.body_quat[:, w]).max() < 1e-3
+    # world 1: the simulated box 10 cm off and turned 0.4 rad about z; world 0's reference hand not touching
+    turn = torch.tensor([np.cos(0.2), 0.0, 0.0, np.sin(0.2)], dtype=torch.float32)
+    moved = replace(
+        s,
+        obj_pos=s.obj_pos + torch.tensor([[[0.0, 0.0, 0.0]], [[0.1, -0.05, 0.02]]]),
+        obj_quat=torch.stack([s.obj_quat[0], quat_mul(turn.expand_as(s.obj_quat[1]), s.obj_quat[1])]),
+    )
+    rf0 = replace(rf, hand=torch.tensor([[False, False], [True, True]]))
+    pos, quat = env.wrist_targets(moved, rf0)
+    torch.testing.assert_close(pos[0], rf.body_pos[0, w], rtol=0, atol=0)  # not touching: the world reference
+    rel = rf.body_pos[1, w] - rf.obj_pos[1, :1]
+    want = quat_rotate(turn.expand(2, 4), rel) + moved.obj_pos[1, :1]
+    torch.testing.assert_close(pos[1], want, atol=1e-5, rtol=0)
+    assert torch.allclose(quat_angle(quat[1], rf.body_quat[1, w]), torch.tensor(0.4), atol=1e-4)
+    # the wrist reset reads them: wrists carried with the object stay inside its thresholds
+    body_pos = moved.body_pos.index_copy(1, w, pos)
+    body_quat = moved.body_quat.index_copy(1, w, quat)
+    carried = replace(moved, body_pos=body_pos, body_quat=body_quat)
+    env._grasp = torch.ones_like(env._grasp)
+    env.steps = torch.full_like(env.steps, 5)
+    phase = torch.full((2,), W.GRASP, dtype=torch.long)
+    _, reason = env._terminations(carried, rf0, rf0.hand, phase)
+    assert (reason != WRIST).all()
+    world = WristMimicEnv.from_file(path, sid, num_worlds=2, config=variant_config("wristmimic"), seed=0, nthread=1)
+    world.reset(start_frames=torch.tensor([f, f]))
+    world._grasp, world.steps = env._grasp.clone(), env.steps.clone()
+    _, reason = world._terminations(carried, rf0, rf0.hand, phase)
+    assert reason[1] == WRIST and reason[0] != WRIST  # the world rule resets the carried wrists
+    _, terms = env._reward(carried, rf0, rf0.hand, phase)
+    _, world_terms = world._reward(carried, rf0, rf0.hand, phase)
+    assert terms["error/wrist_pos"][1] < 1e-8 < 1e-3 < world_terms["error/wrist_pos"][1]  # the factors read them too
+    with pytest.raises(ValueError, match="wrist_frame"):
+        WristMimicEnv.from_file(path, sid, num_worlds=1, config=variant_config("wristmimic", wrist_frame="hand"))

@@ -11,6 +11,7 @@ import runpy
 import signal
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from typer.testing import CliRunner
@@ -298,6 +299,36 @@ def test_sampling_probe_plans_from_one_broadcast_state_with_and_without_a_policy
     )
     frames = [rec["frame"] for rec in probe["probe"](a, log=lambda _: None)]
     assert frames[0] == 6 and frames == list(range(6, frames[-1] + 1))
+
+
+def test_kinematic_grip_probe_holds_the_body_on_its_reference_and_searches_finger_targets(dataset: Path) -> None:
+    """scripts/kinematic_grip_probe.py: the non-finger DoFs replay the reference (the wrists stay on it), the object
+    error is measured at every frame after --start, the cross-entropy search never ends worse than its nominal,
+    and bad frame ranges stop with a one-line error."""
+    probe = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "kinematic_grip_probe.py"))
+    args = probe["parser"]().parse_args([str(dataset), "--scene", SID, "--start", "2", "--stop", "12"])
+    env = probe["build"](args)
+    replay = probe["KinematicReplay"](env, 2, 12)
+    errs = replay.errors(np.zeros(env.num_hinges))
+    assert errs.shape == (10,) and np.isfinite(errs).all()
+    import mujoco
+
+    d, m = replay.d, replay.m
+    wrist = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, env.scene.skeleton.body_names[int(env.sets.wrists[1])])
+    ref_wrist = env.ref.body_pos[12, int(env.sets.wrists[1])].numpy()
+    assert np.linalg.norm(d.xpos[wrist] - ref_wrist) < 0.01  # the wrist is where the reference puts it
+    again = replay.errors(np.zeros(env.num_hinges))
+    np.testing.assert_array_equal(errs, again)  # deterministic replays
+    for extra in (["--synergy", "1.0"], []):
+        a = probe["parser"]().parse_args(
+            [str(dataset), "--scene", SID, "--start", "2", "--stop", "8", "--samples", "4", "--iters", "2", *extra]
+        )
+        out = probe["probe"](a, log=lambda _: None)
+        assert out["dimensions"] == (2 if extra else int(env.finger_actions.sum()))
+        assert len(out["best_errors"]) == 6 and out["best_mean_error"] <= out["iterations"][0]["nominal"]
+    for bad in (["--start", "5", "--stop", "5"], ["--start", "0", "--stop", "999"]):
+        with pytest.raises(SystemExit, match="--start"):
+            probe["build"](probe["parser"]().parse_args([str(dataset), "--scene", SID, *bad]))
 
 
 def test_sigma_schedule_sets_each_rollouts_sigma_and_the_policy_keeps_the_last(dataset: Path, tmp_path: Path) -> None:

@@ -12,6 +12,8 @@ ACTION_MODES = ("residual", "absolute")
 """How policy actions become PD targets (:attr:`EnvConfig.action_mode`)."""
 FINGER_ACTIONS = ("absolute", "delta", "range")
 """How finger actions become PD targets (:attr:`EnvConfig.finger_action`)."""
+WRIST_FRAMES = ("world", "object")
+"""Where the wrist terms and the wrist reset measure a wrist's target (:attr:`EnvConfig.wrist_frame`)."""
 
 VARIANTS = ("wristmimic", "decoupled", "reward-modulation-only", "reset-only", "finger-guidance", "intermimic")
 
@@ -292,6 +294,13 @@ class EnvConfig:
     """Phase-specific wrist thresholds inside the contact window."""
     wrist_terms: bool = True
     """Separate wrist position/rotation reward factors (gwp, gwr); else wrists count as body joints."""
+    wrist_frame: str = "world"
+    """Where the wrist reward factors and the wrist reset measure a wrist's target. ``world``: the reference's wrist
+    pose (the paper). ``object``: in frames where the reference's hand touches an object, the reference wrist pose
+    relative to the reference object, carried by the simulated object (``env/vec_env.py``,
+    :meth:`~wristmimic.env.vec_env.WristMimicEnv.wrist_targets`), so a hand is asked to stay where it grips the
+    object wherever the object is, not to leave it when the object lags its reference. Observations, the other
+    terms and the evaluation's errors keep the world reference."""
     finger_targets: bool = False
     """Finger pose targets in the goal observation and finger pose rewards."""
     weights: RewardWeights = field(default_factory=RewardWeights)
@@ -410,6 +419,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"unknown finger_action {cfg.finger_action!r}; expected one of {', '.join(FINGER_ACTIONS)}")
     if not cfg.finger_delta_scale > 0:
         raise ValueError(f"finger_delta_scale must be > 0, got {cfg.finger_delta_scale}")
+    if cfg.wrist_frame not in WRIST_FRAMES:
+        raise ValueError(f"unknown wrist_frame {cfg.wrist_frame!r}; expected one of {', '.join(WRIST_FRAMES)}")
     if not 0.0 <= cfg.finger_synergy <= math.pi:
         raise ValueError(f"finger_synergy must be in [0, pi] rad, got {cfg.finger_synergy}")
     if cfg.finger_synergy > 0 and cfg.finger_action == "delta":

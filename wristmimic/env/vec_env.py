@@ -45,7 +45,7 @@ from wristmimic.env.starts import AdaptiveStarts, StateBank
 from wristmimic.env.synergy import HANDS as SYNERGY_HANDS
 from wristmimic.env.synergy import closure_coefficients
 from wristmimic.env.terminations import REASONS, ContactLostCounter, TerminationInputs, check_terminations
-from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_to_matrix, quat_to_rotvec
+from wristmimic.env.torch_math import quat_angle, quat_conj, quat_mul, quat_rotate, quat_to_matrix, quat_to_rotvec
 from wristmimic.errors import InputError
 from wristmimic.format.reader import open_dataset
 from wristmimic.scene import Scene, SceneConfig, build_scene
@@ -770,11 +770,16 @@ class WristMimicEnv:
         in_window = phase != W.OUTSIDE
         f = self.frame.clamp(0, self.ref.num_frames - 1)
         key = self.sets.key
+        ref_pos, ref_quat = rf.body_pos, rf.body_quat
+        if self.cfg.wrist_frame == "object":  # the wrist factors' targets only (the interaction graph keeps rf's)
+            wp, wq = self.wrist_targets(s, rf)
+            ref_pos = ref_pos.index_copy(1, self.sets.wrists, wp)
+            ref_quat = ref_quat.index_copy(1, self.sets.wrists, wq)
         x = RewardInputs(
             body_pos=s.body_pos,
             body_quat=s.body_quat,
-            ref_body_pos=rf.body_pos,
-            ref_body_quat=rf.body_quat,
+            ref_body_pos=ref_pos,
+            ref_body_quat=ref_quat,
             ref_near_dist=self.ref.near_dist.index_select(0, f),
             obj_pos=s.obj_pos,
             obj_quat=s.obj_quat,
@@ -807,6 +812,21 @@ class WristMimicEnv:
         )
         return compute_reward(x, self.sets, self.cfg)
 
+    def wrist_targets(self, s: SimState, rf: RefFrame) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 2, 3), (N, 2, 4) wrist targets in the object frame (``wrist_frame=object``): for a hand the reference
+        shows touching an object this frame, its reference wrist pose relative to the reference pose of the first
+        dynamic object, carried by that object's simulated pose; the reference wrist pose otherwise."""
+        w = self.sets.wrists
+        pos, quat = rf.body_pos.index_select(1, w), rf.body_quat.index_select(1, w)
+        if s.obj_pos.shape[1] == 0:
+            return pos, quat
+        ref_q, sim_q = rf.obj_quat[:, :1], s.obj_quat[:, :1]  # (N, 1, 4)
+        to_sim = quat_mul(sim_q, quat_conj(ref_q))  # (N, 1, 4): reference object frame -> simulated object frame
+        goal_pos = quat_rotate(to_sim.expand_as(quat), pos - rf.obj_pos[:, :1]) + s.obj_pos[:, :1]
+        goal_quat = quat_mul(to_sim.expand_as(quat), quat)
+        use = rf.hand[..., None]
+        return torch.where(use, goal_pos, pos), torch.where(use, goal_quat, quat)
+
     def _tip_sq_dists(self, s: SimState, sq: torch.Tensor | None) -> torch.Tensor:
         """(N, 2, nt) squared distance of each hand's fingertips to their nearest object surface point."""
         tips = self.sets.fingertips
@@ -822,6 +842,9 @@ class WristMimicEnv:
     ) -> tuple[torch.Tensor, torch.Tensor]:
         lost = self.lost.update(rf.hand, sim_hand)
         w = self.sets.wrists
+        ref_wp, ref_wq = rf.body_pos.index_select(1, w), rf.body_quat.index_select(1, w)
+        if self.cfg.wrist_frame == "object":
+            ref_wp, ref_wq = self.wrist_targets(s, rf)
         x = TerminationInputs(
             root_height=s.body_pos[:, 0, 2],
             body_pos=s.body_pos,
@@ -830,9 +853,9 @@ class WristMimicEnv:
             ref_obj_points=rf.points,
             contact_lost=lost,
             wrist_pos=s.body_pos.index_select(1, w),
-            ref_wrist_pos=rf.body_pos.index_select(1, w),
+            ref_wrist_pos=ref_wp,
             wrist_quat=s.body_quat.index_select(1, w),
-            ref_wrist_quat=rf.body_quat.index_select(1, w),
+            ref_wrist_quat=ref_wq,
             phase=ph,
             grasp_hands=self._grasp,
             step=self.steps,

@@ -1,0 +1,163 @@
+"""Kinematic grip probe: can the reference's own wrist path carry the object with any finger pose?
+
+Usage:  python scripts/kinematic_grip_probe.py DATASET.h5 --scene SEQ --start F0 --stop F1
+        [--hands right|left|both] [--samples 48] [--iters 10] [--sigma 0.5] [--synergy 0]
+        [--set scene_config.FIELD=VALUE ...] [--seed 0] [-o probe.json]
+
+Every non-finger degree of freedom of the humanoid (the root and every body and wrist hinge) follows the reference
+exactly: before each physics substep its position (interpolated between the two frames) and velocity are set, so
+the wrists are where the mocap puts them whatever the load. The finger hinges are PD-driven to constant targets, the
+start frame's reference angle plus an offset, and the objects are free. A cross-entropy search over the offsets of
+the chosen hands' finger hinges (``--samples`` per iteration, the cheapest eighth kept, noise ``--sigma`` rad
+annealed by 0.85) minimises the mean object-position error over the frames after ``--start``. ``--synergy S``
+searches one number per hand instead: S times it along the grasp synergy's closure (:mod:`wristmimic.env.synergy`).
+
+A success here (an error that stays small) says the reference's wrist path can carry the object and a policy's
+fingers have something to find; a failure says the wrists themselves must leave the reference. A diagnostic, not a
+training method: ``reports/README.md`` says what it found on the shared scenes. Prints one line per iteration and
+the best sample's error per frame; ``-o`` writes them as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from wristmimic.env.config import EnvConfig
+from wristmimic.env.synergy import closure_coefficients
+from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.errors import InputError
+from wristmimic.rl.config import to_jsonable
+from wristmimic.rl.overrides import apply_overrides
+from wristmimic.safe_io import atomic_output
+from wristmimic.scene import SceneConfig, scene_config_from_dict
+
+HANDS = {"left": ("left",), "right": ("right",), "both": ("left", "right")}
+
+
+class KinematicReplay:
+    """One MuJoCo world replaying the reference with the body kinematic and the fingers PD-driven."""
+
+    def __init__(self, env: WristMimicEnv, start: int, stop: int):
+        self.m = env.scene.model
+        self.d = mujoco.MjData(self.m)
+        self.qpos, self.qvel = env._ref_qpos.numpy(), env._ref_qvel.numpy()
+        self.hinge_q = env.scene.hinge_qposadr.reshape(-1)
+        fingers = env.finger_actions.numpy().astype(bool)
+        self.fingers = fingers
+        self.body_q = np.concatenate([np.arange(7), self.hinge_q[~fingers]])
+        self.body_v = np.concatenate([np.arange(6), env.scene.hinge_dofadr.reshape(-1)[~fingers]])
+        self.act = env.scene.actuator_ids.reshape(-1)
+        self.lo, self.hi = env._lo.numpy(), env._hi.numpy()
+        self.obj_q = env._obj_pos_q.numpy()[0]
+        self.substeps = env.scene.config.substeps
+        self.start, self.stop = start, stop
+
+    def errors(self, finger_offset: np.ndarray) -> np.ndarray:
+        """(stop - start,) object position error (m) at each frame reached, finger targets = start pose + offset."""
+        m, d, q, v = self.m, self.d, self.qpos, self.qvel
+        d.qpos[:], d.qvel[:] = q[self.start], v[self.start]
+        d.act[:] = 0.0
+        mujoco.mj_forward(m, d)
+        fingers = np.clip(q[self.start][self.hinge_q] + finger_offset, self.lo, self.hi)
+        out = []
+        for t in range(self.start, self.stop):
+            for s in range(self.substeps):
+                a = (s + 1) / self.substeps
+                pose = (1 - a) * q[t] + a * q[t + 1]
+                pose[3:7] /= np.linalg.norm(pose[3:7])
+                d.qpos[self.body_q], d.qvel[self.body_v] = pose[self.body_q], v[t][self.body_v]
+                d.ctrl[self.act] = np.where(self.fingers, fingers, pose[self.hinge_q])
+                mujoco.mj_step(m, d)
+            out.append(float(np.linalg.norm(d.qpos[self.obj_q] - q[t + 1][self.obj_q])))
+        return np.asarray(out)
+
+
+def build(args: argparse.Namespace) -> WristMimicEnv:
+    if any(not text.startswith("scene_config.") for text in args.set):
+        raise SystemExit("--set: only scene_config.FIELD overrides apply here")
+    cfg = apply_overrides({"scene_config": to_jsonable(SceneConfig())}, args.set)["scene_config"]
+    env = WristMimicEnv.from_file(args.dataset, args.scene, 1, EnvConfig(), scene_config_from_dict(cfg), nthread=1)
+    if not env.scene.dynamic_objects:
+        raise SystemExit(f"error: {args.dataset}: scene {args.scene} has no dynamic object to carry")
+    T = env.ref.num_frames
+    if not 0 <= args.start < args.stop < T:
+        raise SystemExit(f"error: need 0 <= --start < --stop < {T} (the scene's frames), got {args.start}, {args.stop}")
+    return env
+
+
+def probe(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
+    env = build(args)
+    replay = KinematicReplay(env, args.start, args.stop)
+    skel, roles = env.scene.skeleton, env.scene.humanoid.roles
+    chosen = np.zeros(env.num_hinges, dtype=bool)
+    for side in HANDS[args.hands]:
+        chosen |= np.repeat(np.isin(skel.joint_bodies, roles[f"{side}_hand"]), 3) & replay.fingers
+    if args.synergy > 0:
+        closure = closure_coefficients(env.scene)[[("left", "right").index(h) for h in HANDS[args.hands]]]
+        basis = args.synergy * closure  # (hands, H): one search dimension per hand
+    else:
+        basis = np.eye(env.num_hinges)[chosen]  # one search dimension per finger hinge
+    rng = np.random.default_rng(args.seed)
+    mean, sigma = np.zeros(len(basis)), args.sigma
+    keep = max(args.samples // 8, 2)
+    best: tuple[float, np.ndarray, np.ndarray] = (np.inf, mean, np.zeros(0))
+    iterations = []
+    for it in range(args.iters):
+        x = mean + sigma * rng.standard_normal((args.samples, len(basis)))
+        x[0] = mean
+        errs = [replay.errors(xi @ basis) for xi in x]
+        cost = np.array([e.mean() for e in errs])
+        elite = np.argsort(cost)[:keep]
+        if cost[elite[0]] < best[0]:
+            best = (float(cost[elite[0]]), x[elite[0]].copy(), errs[elite[0]])
+        mean, sigma = x[elite].mean(axis=0), sigma * 0.85
+        row = {"iteration": it, "nominal": float(cost[0]), "best": float(cost.min()), "elite": float(cost[elite].mean())}
+        iterations.append(row)
+        log(f"{it}: mean error nominal {100 * row['nominal']:.1f} cm, best {100 * row['best']:.1f}, elite {100 * row['elite']:.1f}")
+    frames = list(range(args.start + 1, args.stop + 1))
+    log("best sample's object error (cm): " + " ".join(f"{f}:{100 * e:.1f}" for f, e in list(zip(frames, best[2]))[::4]))
+    return {
+        "dimensions": len(basis),
+        "iterations": iterations,
+        "best_mean_error": best[0],
+        "best_errors": dict(zip(frames, best[2].tolist())),
+        "best_parameters": best[1].tolist(),
+    }
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("dataset", type=Path)
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--start", type=int, required=True, help="reference frame the replay starts from")
+    ap.add_argument("--stop", type=int, required=True, help="last frame reached")
+    ap.add_argument("--hands", choices=tuple(HANDS), default="both")
+    ap.add_argument("--samples", type=int, default=48)
+    ap.add_argument("--iters", type=int, default=10)
+    ap.add_argument("--sigma", type=float, default=0.5, help="initial noise (rad; synergy units with --synergy)")
+    ap.add_argument("--synergy", type=float, default=0.0, help="> 0: search the grasp synergy (rad per unit)")
+    ap.add_argument("--set", action="append", default=[], help="scene_config.FIELD=VALUE")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("-o", "--out", type=Path, default=Path("grip_probe.json"))
+    return ap
+
+
+def main() -> None:
+    args = parser().parse_args()
+    try:
+        result = probe(args)
+    except InputError as exc:
+        raise SystemExit(f"error: {exc}") from None
+    with atomic_output(args.out) as tmp:
+        Path(tmp).write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, **result}))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
