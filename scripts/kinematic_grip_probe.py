@@ -117,16 +117,26 @@ def probe(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
         if cost[elite[0]] < best[0]:
             best = (float(cost[elite[0]]), x[elite[0]].copy(), errs[elite[0]])
         mean, sigma = x[elite].mean(axis=0), sigma * 0.85
-        row = {"iteration": it, "nominal": float(cost[0]), "best": float(cost.min()), "elite": float(cost[elite].mean())}
+        row = {
+            "iteration": it,
+            "nominal": float(cost[0]),
+            "best": float(cost.min()),
+            "elite": float(cost[elite].mean()),
+        }
         iterations.append(row)
-        log(f"{it}: mean error nominal {100 * row['nominal']:.1f} cm, best {100 * row['best']:.1f}, elite {100 * row['elite']:.1f}")
+        log(
+            f"{it}: mean error nominal {100 * row['nominal']:.1f} cm, best {100 * row['best']:.1f}, elite {100 * row['elite']:.1f}"
+        )
     frames = list(range(args.start + 1, args.stop + 1))
-    log("best sample's object error (cm): " + " ".join(f"{f}:{100 * e:.1f}" for f, e in list(zip(frames, best[2]))[::4]))
+    log(
+        "best sample's object error (cm): "
+        + " ".join(f"{f}:{100 * e:.1f}" for f, e in list(zip(frames, best[2], strict=True))[::4])
+    )
     return {
         "dimensions": len(basis),
         "iterations": iterations,
         "best_mean_error": best[0],
-        "best_errors": dict(zip(frames, best[2].tolist())),
+        "best_errors": dict(zip(frames, best[2].tolist(), strict=True)),
         "best_parameters": best[1].tolist(),
     }
 
