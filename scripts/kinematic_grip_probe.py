@@ -27,6 +27,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+import torch
 
 from wristmimic.env.config import EnvConfig
 from wristmimic.env.synergy import closure_coefficients
@@ -46,15 +47,16 @@ class KinematicReplay:
     def __init__(self, env: WristMimicEnv, start: int, stop: int):
         self.m = env.scene.model
         self.d = mujoco.MjData(self.m)
-        self.qpos, self.qvel = env._ref_qpos.numpy(), env._ref_qvel.numpy()
+        qpos, qvel = env.reference_state(torch.arange(env.ref.num_frames))
+        self.qpos, self.qvel = qpos.numpy(), qvel.numpy()
         self.hinge_q = env.scene.hinge_qposadr.reshape(-1)
         fingers = env.finger_actions.numpy().astype(bool)
         self.fingers = fingers
         self.body_q = np.concatenate([np.arange(7), self.hinge_q[~fingers]])
         self.body_v = np.concatenate([np.arange(6), env.scene.hinge_dofadr.reshape(-1)[~fingers]])
         self.act = env.scene.actuator_ids.reshape(-1)
-        self.lo, self.hi = env._lo.numpy(), env._hi.numpy()
-        self.obj_q = env._obj_pos_q.numpy()[0]
+        self.lo, self.hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
+        self.obj_q = env.scene.dynamic_objects[0].qposadr + np.arange(3)  # the first object's position
         self.substeps = env.scene.config.substeps
         self.start, self.stop = start, stop
 

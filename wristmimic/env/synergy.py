@@ -60,13 +60,13 @@ def closure_coefficients(scene: Scene) -> np.ndarray:
     m = scene.model
     d = mujoco.MjData(m)
     d.qpos[:] = m.qpos0
-    mujoco.mj_kinematics(m, d)
-    mujoco.mj_comPos(m, d)
+    mujoco.mj_kinematics(m, d)  # body frames, joint anchors and axes
     skel, roles = scene.skeleton, scene.humanoid.roles
     body_id = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in skel.body_names])
     skel_of = {int(b): i for i, b in enumerate(body_id)}
     actuators = scene.actuator_ids.reshape(-1)
     out = np.zeros((2, len(actuators)))
+    pos = d.xpos[body_id]
     for h, side in enumerate(HANDS):
         hand = {int(b) for b in roles[f"{side}_hand"]}
         wrists = [int(w) for w in roles["wrists"] if int(w) in hand]
@@ -74,7 +74,6 @@ def closure_coefficients(scene: Scene) -> np.ndarray:
         if not wrists or not tips:
             raise ValueError(f"finger_synergy needs the {side} hand's wrist and fingertips in the humanoid's roles")
         wrist = wrists[0]
-        pos = d.xpos[body_id]
         tip_at = {t: tip_point(m, d, int(body_id[t]), int(body_id[skel.parents[t]])) for t in tips}
         base = np.array([pos[c] for c in skel.children(wrist)] + [pos[wrist]])
         n = palm_normal(base, np.array([0.0, 0.0, -1.0]))

@@ -663,8 +663,9 @@ class WristMimicEnv:
         rf = self.ref_frame(self.frame)
         hand = self._sim_hand(s)  # shared by reward, terminations and the evaluation errors
         _, phase = self._window()
-        reward, terms = self._reward(s, rf, hand, phase, sq)
-        terminated, reason = self._terminations(s, rf, hand, phase)
+        wrists = self.wrist_targets(s, rf) if self.cfg.wrist_frame == "object" else None
+        reward, terms = self._reward(s, rf, hand, phase, sq, wrists)
+        terminated, reason = self._terminations(s, rf, hand, phase, wrists)
         if self.starts is not None:
             self.starts.record(self.frame, terminated)
         if self.bank is not None:
@@ -764,15 +765,22 @@ class WristMimicEnv:
         return ph != W.OUTSIDE, ph
 
     def _reward(
-        self, s: SimState, rf: RefFrame, sim_hand: torch.Tensor, phase: torch.Tensor, sq: torch.Tensor | None = None
+        self,
+        s: SimState,
+        rf: RefFrame,
+        sim_hand: torch.Tensor,
+        phase: torch.Tensor,
+        sq: torch.Tensor | None = None,
+        wrists: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """Reward and its terms; ``sq``: :meth:`_point_sq_dists` of ``s`` if already computed."""
+        """Reward and its terms; ``sq``: :meth:`_point_sq_dists` of ``s`` and ``wrists``: :meth:`wrist_targets`
+        (``wrist_frame=object``), if already computed."""
         in_window = phase != W.OUTSIDE
         f = self.frame.clamp(0, self.ref.num_frames - 1)
         key = self.sets.key
         ref_pos, ref_quat = rf.body_pos, rf.body_quat
         if self.cfg.wrist_frame == "object":  # the wrist factors' targets only (the interaction graph keeps rf's)
-            wp, wq = self.wrist_targets(s, rf)
+            wp, wq = self.wrist_targets(s, rf) if wrists is None else wrists
             ref_pos = ref_pos.index_copy(1, self.sets.wrists, wp)
             ref_quat = ref_quat.index_copy(1, self.sets.wrists, wq)
         x = RewardInputs(
@@ -838,13 +846,18 @@ class WristMimicEnv:
         return sq.index_select(1, rows).amin(-1).view(-1, *tips.shape)
 
     def _terminations(
-        self, s: SimState, rf: RefFrame, sim_hand: torch.Tensor, ph: torch.Tensor
+        self,
+        s: SimState,
+        rf: RefFrame,
+        sim_hand: torch.Tensor,
+        ph: torch.Tensor,
+        wrists: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         lost = self.lost.update(rf.hand, sim_hand)
         w = self.sets.wrists
         ref_wp, ref_wq = rf.body_pos.index_select(1, w), rf.body_quat.index_select(1, w)
         if self.cfg.wrist_frame == "object":
-            ref_wp, ref_wq = self.wrist_targets(s, rf)
+            ref_wp, ref_wq = self.wrist_targets(s, rf) if wrists is None else wrists
         x = TerminationInputs(
             root_height=s.body_pos[:, 0, 2],
             body_pos=s.body_pos,
