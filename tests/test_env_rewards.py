@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from wristmimic.env.bodies import BodySets
-from wristmimic.env.config import EnvConfig, RewardWeights, variant_config
+from wristmimic.env.config import EnvConfig, RewardWeights, check_env_config, variant_config
 from wristmimic.env.rewards import RewardInputs, arm_weights, compute_reward, error_ig, factor_names
 from wristmimic.env.torch_math import quat_angle
 from wristmimic.humanoid.roles import compute_roles, detect_profile
@@ -138,6 +138,19 @@ def test_wristmimic_body_and_wrist_factors() -> None:
     _close(info["reward/wrist_rot"], [math.exp(-0.2)] * 3)
     assert "reward/finger_pos" not in info and "reward/finger_rot" not in info
     assert reward.shape == (N,)
+
+
+def test_reward_form_mean_averages_the_same_factors() -> None:
+    cfg = variant_config("wristmimic")
+    product, info = compute_reward(toy_inputs(), SETS, cfg)
+    mean, info_mean = compute_reward(toy_inputs(), SETS, replace(cfg, reward_form="mean"))
+    factors = torch.stack([info[f"reward/{n}"] for n in factor_names(cfg)], -1)
+    _close(product, factors.prod(-1).tolist())
+    _close(mean, factors.mean(-1).tolist())
+    assert info_mean.keys() == info.keys()
+    assert torch.all(mean >= product) and not torch.allclose(mean, product)  # partial credit: never below the product
+    with pytest.raises(ValueError, match="reward_form"):
+        check_env_config(replace(cfg, reward_form="sum"))
 
 
 def test_object_ig_contact_and_energy_factors() -> None:

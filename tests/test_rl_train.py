@@ -331,6 +331,44 @@ def test_kinematic_grip_probe_holds_the_body_on_its_reference_and_searches_finge
             probe["build"](probe["parser"]().parse_args([str(dataset), "--scene", SID, *bad]))
 
 
+def test_kinematic_grip_probe_moves_wrists_with_the_object_and_holds_the_object(dataset: Path) -> None:
+    """The probe's arm offset map moves a touching hand's wrist by the object-frame offset (to first order, with its
+    orientation kept), leaves a hand far from contact where it was, and --hold keeps the object on its reference."""
+    import mujoco
+
+    from wristmimic.rotations import quat_to_matrix
+
+    probe = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "kinematic_grip_probe.py"))
+    env = probe["build"](probe["parser"]().parse_args([str(dataset), "--scene", SID, "--start", "2", "--stop", "12"]))
+    replay = probe["KinematicReplay"](env, 2, 12)
+    arms, q, v = replay.arms, replay.qpos, replay.qvel
+    touch = env.ref.hand.numpy().astype(bool)
+    assert touch.any(), "the test scene needs reference hand contact"
+    t = int(np.flatnonzero(touch.any(1))[touch.any(1).sum() // 2])
+    assert arms.weight[t][touch[t]].tolist() == [1.0] * int(touch[t].sum()) and arms.weight.min() >= 0.0
+    off = np.array([[0.02, 0.0, -0.01], [0.0, 0.015, 0.0]])
+    q2, v2 = arms.apply(q, v, off)
+    changed = np.flatnonzero(np.any(q2 != q, axis=0))
+    assert set(changed) <= set(arms.qpos_index.reshape(-1).tolist())  # arm hinges only
+    m, d = replay.m, replay.d
+    wrists = [int(env.scene.body_ids[int(env.sets.wrists[h])]) for h in range(2)]
+
+    def pose(qq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d.qpos[:] = qq
+        mujoco.mj_kinematics(m, d)
+        return d.xpos[wrists].copy(), d.xmat[wrists].reshape(2, 3, 3).copy()
+
+    (p0, r0), (p1, r1) = pose(q[t]), pose(q2[t])
+    want = arms.weight[t][:, None] * np.einsum("ij,hj->hi", quat_to_matrix(env.ref.obj_quat[t, 0].numpy()), off)
+    np.testing.assert_allclose(p1 - p0, want, atol=2e-3)
+    assert np.all(np.einsum("hij,hij->h", r0, r1) > 1.0 + 2.0 * np.cos(0.05))  # orientation kept within 0.05 rad
+    far = np.flatnonzero(arms.weight.max(1) == 0.0)
+    if far.size:
+        np.testing.assert_array_equal(q2[far], q[far])
+    held = replay.errors(np.zeros(env.num_hinges), off, hold_until=12)
+    assert held.max() < 1e-6  # the object sat on its reference for every frame
+
+
 def test_sigma_schedule_sets_each_rollouts_sigma_and_the_policy_keeps_the_last(dataset: Path, tmp_path: Path) -> None:
     kw = dict(learn_std=False, min_std=0.0, final_std=0.01, std_anneal_start=32, std_anneal_end=96)
     start_run(_spec(dataset, 4, **kw), tmp_path / "run", nthread=1, progress=False)

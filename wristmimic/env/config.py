@@ -14,6 +14,8 @@ FINGER_ACTIONS = ("absolute", "delta", "range")
 """How finger actions become PD targets (:attr:`EnvConfig.finger_action`)."""
 WRIST_FRAMES = ("world", "object")
 """Where the wrist terms and the wrist reset measure a wrist's target (:attr:`EnvConfig.wrist_frame`)."""
+REWARD_FORMS = ("product", "mean")
+"""How the reward factors combine (:attr:`EnvConfig.reward_form`)."""
 
 VARIANTS = ("wristmimic", "decoupled", "reward-modulation-only", "reset-only", "finger-guidance", "intermimic")
 
@@ -301,6 +303,10 @@ class EnvConfig:
     :meth:`~wristmimic.env.vec_env.WristMimicEnv.wrist_targets`), so a hand is asked to stay where it grips the
     object wherever the object is, not to leave it when the object lags its reference. Observations, the other
     terms and the evaluation's errors keep the world reference."""
+    reward_form: str = "product"
+    """How the reward factors exp(-lambda E) combine. ``product``: their product (the paper, InterMimic), so one
+    factor near 0 zeroes the step's reward. ``mean``: their mean (DeepMimic's and BeyondMimic's weighted sum, equal
+    weights), which keeps partial credit for the terms still tracked."""
     finger_targets: bool = False
     """Finger pose targets in the goal observation and finger pose rewards."""
     weights: RewardWeights = field(default_factory=RewardWeights)
@@ -421,6 +427,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"finger_delta_scale must be > 0, got {cfg.finger_delta_scale}")
     if cfg.wrist_frame not in WRIST_FRAMES:
         raise ValueError(f"unknown wrist_frame {cfg.wrist_frame!r}; expected one of {', '.join(WRIST_FRAMES)}")
+    if cfg.reward_form not in REWARD_FORMS:
+        raise ValueError(f"unknown reward_form {cfg.reward_form!r}; expected one of {', '.join(REWARD_FORMS)}")
     if not 0.0 <= cfg.finger_synergy <= math.pi:
         raise ValueError(f"finger_synergy must be in [0, pi] rad, got {cfg.finger_synergy}")
     if cfg.finger_synergy > 0 and cfg.finger_action == "delta":

@@ -321,7 +321,8 @@ def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
 def compute_reward(
     x: RewardInputs, sets: BodySets, cfg: EnvConfig, consts: RewardConstants = CONSTANTS
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """(N,) reward = product of factors; dict 'reward/<name>' -> (N,) factor, 'error/<name>' -> (N,) raw error.
+    """(N,) reward = product (``reward_form="mean"``: mean) of factors; dict 'reward/<name>' -> (N,) factor,
+    'error/<name>' -> (N,) raw error.
 
     Body terms use lambda p / r outside the window and gbp / gbr inside it (window_modulation only).
     Energy errors are zeroed (factor 1) while step < consts.energy_start_step.
@@ -389,7 +390,8 @@ def compute_reward(
     errors["contact_hand"] = hand_err.sum(-1)  # reference-contact hands without simulated contact (0, 1, 2)
 
     order = factor_names(cfg)
-    reward = torch.stack([factors[n] for n in order], dim=-1).prod(-1)
+    stacked = torch.stack([factors[n] for n in order], dim=-1)
+    reward = stacked.mean(-1) if cfg.reward_form == "mean" else stacked.prod(-1)
     info = {f"reward/{n}": factors[n] for n in order}
     info.update({f"error/{n}": errors[n] for n in order})
     return reward, info
