@@ -89,7 +89,7 @@ def contact_ramp(touch: np.ndarray, ramp: int) -> np.ndarray:
         frames = np.flatnonzero(touch[:, h])
         if frames.size:
             dist = np.abs(t[:, None] - frames[None, :]).min(axis=1)
-            out[:, h] = np.clip(1.0 - dist / max(ramp, 1), 0.0, 1.0) if ramp > 0 else (dist == 0)
+            out[:, h] = np.clip(1.0 - dist / max(ramp, 1), 0.0, 1.0)
     return out
 
 
@@ -165,7 +165,7 @@ class KinematicReplay:
         self, finger_offset: np.ndarray, wrist_offsets: np.ndarray | None = None, hold_until: int = -1
     ) -> np.ndarray:
         """(stop - start,) object position error (m) at each frame reached, finger targets = start pose + offset,
-        each hand moved by ``wrist_offsets`` (2, 3) m in the object's frame while it touches (:mod:`wristmimic.refine`);
+        each hand moved by ``wrist_offsets`` (2, 3) m in the object's frame while it touches (:class:`ArmOffsetMap`);
         the object is held on its reference (kinematic) before frame ``hold_until``, so the grasp forms on it."""
         m, d, q, v = self.m, self.d, self.qpos, self.qvel
         if wrist_offsets is not None:
