@@ -125,34 +125,47 @@ def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: t
 
     with open_dataset(synth_files[0]) as ds:
         o = build_scene(ds, "sub1_box_000").model.opt  # defaults: MuJoCo's own
-        assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone) == (
+        assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone, o.impratio, o.noslip_iterations) == (
             mujoco.mjtSolver.mjSOL_NEWTON,
             100,
             50,
             1e-8,
             mujoco.mjtCone.mjCONE_PYRAMIDAL,
+            1.0,
+            0,
         )
         # a run recorded before the solver fields existed stepped with MuJoCo's Newton, 100 iterations
         recorded = {k: v for k, v in to_jsonable(SceneConfig(solver="pgs", iterations=20)).items()}
         recorded = {k: v for k, v in recorded.items() if k not in ("solver", "iterations")}
         o = build_scene(ds, "sub1_box_000", scene_config_from_dict(recorded)).model.opt
         assert (o.solver, o.iterations) == (mujoco.mjtSolver.mjSOL_NEWTON, 100)
-        cfg = SceneConfig(solver="newton", iterations=7, ls_iterations=5, tolerance=1e-6, cone="elliptic")
+        cfg = SceneConfig(
+            solver="newton", iterations=7, ls_iterations=5, tolerance=1e-6, cone="elliptic", impratio=10.0
+        )
         o = build_scene(ds, "sub1_box_000", cfg).model.opt
-        assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone) == (
+        assert (o.solver, o.iterations, o.ls_iterations, o.tolerance, o.cone, o.impratio) == (
             mujoco.mjtSolver.mjSOL_NEWTON,
             7,
             5,
             1e-6,
             mujoco.mjtCone.mjCONE_ELLIPTIC,
+            10.0,
         )
+        assert build_scene(ds, "sub1_box_000", SceneConfig(noslip_iterations=3)).model.opt.noslip_iterations == 3
         pgs = build_scene(ds, "sub1_box_000", SceneConfig(solver="pgs", iterations=20)).model
         newton = newton_for_pgs(pgs)  # what the Warp backend steps
         assert (newton.opt.solver, newton.opt.iterations) == (mujoco.mjtSolver.mjSOL_NEWTON, 100)
         assert (pgs.opt.solver, pgs.opt.iterations) == (mujoco.mjtSolver.mjSOL_PGS, 20)
         kept = build_scene(ds, "sub1_box_000", cfg).model
         assert newton_for_pgs(kept) is kept
-        for bad in (SceneConfig(solver="jacobi"), SceneConfig(cone="round"), SceneConfig(iterations=0)):
+        for bad in (
+            SceneConfig(solver="jacobi"),
+            SceneConfig(cone="round"),
+            SceneConfig(iterations=0),
+            SceneConfig(impratio=0.5),
+            SceneConfig(impratio=float("nan")),
+            SceneConfig(noslip_iterations=-1),
+        ):
             with pytest.raises(InputError, match="scene_config"):
                 build_scene(ds, "sub1_box_000", bad)
 

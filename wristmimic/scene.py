@@ -74,6 +74,12 @@ class SceneConfig:
     """Solver tolerance (MuJoCo's default)."""
     cone: str = "pyramidal"
     """Friction cone: pyramidal (MuJoCo's default) or elliptic."""
+    impratio: float = 1.0
+    """Ratio of frictional to normal constraint impedance (MuJoCo's ``impratio``, default 1). MuJoCo's soft
+    friction lets a held object creep under a tangential load below its friction limit; values above 1 make
+    friction stiffer than the normal constraint (MuJoCo recommends them with elliptic cones)."""
+    noslip_iterations: int = 0
+    """MuJoCo's no-slip post-solver iterations (0: off, MuJoCo's default)."""
     armature: float = 0.02
     density: float | None = None
     """Density (kg/m^3) of every humanoid geom; None keeps the MJCF's own. PHC's and SkillMimic's humanoids weigh
@@ -401,6 +407,13 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
         )
     if cfg.iterations < 1 or cfg.ls_iterations < 1 or not cfg.tolerance >= 0.0:
         raise InputError(None, "scene_config", "iterations and ls_iterations >= 1, tolerance >= 0")
+    if not (np.isfinite(cfg.impratio) and cfg.impratio >= 1.0) or cfg.noslip_iterations < 0:
+        raise InputError(
+            None,
+            "scene_config",
+            f"impratio {cfg.impratio!r}, noslip_iterations {cfg.noslip_iterations!r}",
+            "a finite impratio >= 1 and noslip_iterations >= 0",
+        )
     for name in ("density", "object_density"):
         v = getattr(cfg, name)
         if v is not None and not (np.isfinite(v) and v > 0):
@@ -424,6 +437,8 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{cfg.cone.upper()}")
     spec.option.iterations, spec.option.ls_iterations = int(cfg.iterations), int(cfg.ls_iterations)
     spec.option.tolerance = float(cfg.tolerance)
+    spec.option.impratio = float(cfg.impratio)
+    spec.option.noslip_iterations = int(cfg.noslip_iterations)
 
 
 def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None) -> Scene:
