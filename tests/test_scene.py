@@ -111,13 +111,21 @@ def test_support_friction_governs_object_floor_contacts_but_not_the_hands(synth_
     with open_dataset(synth_files[0]) as ds:
         base = build_scene(ds, "sub1_box_000")
         low = build_scene(ds, "sub1_box_000", SceneConfig(support_friction=0.3))
-        for bad in (-0.1, float("nan")):
-            with pytest.raises(InputError, match="support_friction"):
-                build_scene(ds, "sub1_box_000", SceneConfig(support_friction=bad))
+        grip = build_scene(ds, "sub1_box_000", SceneConfig(hand_friction=2.0))
+        both = build_scene(ds, "sub1_box_000", SceneConfig(hand_friction=2.0, support_friction=0.3))
+        for field in ("support_friction", "hand_friction"):
+            for bad in (-0.1, float("nan")):
+                with pytest.raises(InputError, match=field):
+                    build_scene(ds, "sub1_box_000", SceneConfig(**{field: bad}))
     assert contact_friction(base, hand=False) == pytest.approx(1.0)  # MuJoCo's max(floor 1.0, object)
     assert contact_friction(low, hand=False) == pytest.approx(0.3)
     assert contact_friction(low, hand=True) == pytest.approx(contact_friction(base, hand=True)) == pytest.approx(1.0)
     assert (base.model.geom_priority == 0).all()
+    # hand_friction: the hands' grip changes, the object's friction with the floor does not
+    assert contact_friction(grip, hand=True) == pytest.approx(2.0)
+    assert contact_friction(grip, hand=False) == pytest.approx(1.0)
+    assert contact_friction(both, hand=True) == pytest.approx(2.0)
+    assert contact_friction(both, hand=False) == pytest.approx(0.3)
 
 
 def test_solver_settings_reach_the_model_and_bad_ones_are_refused(synth_files: tuple[Path, Path]) -> None:

@@ -100,6 +100,10 @@ class SceneConfig:
     hand_torsional_friction: float = 0.015
     """Torsional friction coefficient (m) of the hand geoms when ``hand_condim`` >= 4: about mu * (2/3) r for a
     contact patch of radius r ~ 2 cm (MuJoCo's default is 0.005)."""
+    hand_friction: float | None = None
+    """Sliding friction of the hand geoms (palms and fingers); None keeps the MJCF's (1 for SMPL-X). MuJoCo takes the
+    larger of two geoms' frictions (or the higher priority's under ``support_friction``), so this sets the hands'
+    grip on objects without touching the objects' friction with the floor or their supports."""
     object_damping: float = 0.01
     """Linear/angular damping of dynamic objects (free-joint dof damping)."""
     object_friction: float | None = None
@@ -328,6 +332,8 @@ def _humanoid(
             g.contype, g.conaffinity = HUMANOID_CONTYPE, HUMANOID_CONAFFINITY
             if cfg.contact_condim is not None:
                 g.condim = cfg.contact_condim
+            if body.name in hands and cfg.hand_friction is not None:
+                g.friction = [float(cfg.hand_friction), float(g.friction[1]), float(g.friction[2])]
             if body.name in hands and cfg.hand_condim != 3:
                 g.condim = cfg.hand_condim
                 g.friction = [float(g.friction[0]), cfg.hand_torsional_friction, float(g.friction[2])]
@@ -429,7 +435,7 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
             f"{cfg.finger_ranges!r} with margin {cfg.finger_range_margin!r}",
             f"one of {', '.join(FINGER_RANGES)} and a finite margin >= 0 (rad)",
         )
-    for name in ("object_friction", "support_friction"):
+    for name in ("object_friction", "support_friction", "hand_friction"):
         v = getattr(cfg, name)
         if v is not None and not (np.isfinite(v) and v >= 0):
             raise InputError(None, f"scene_config.{name}", f"invalid value {v!r}", "None or a finite number >= 0")
