@@ -167,6 +167,38 @@ def test_start_hold_holds_only_mid_clip_starts_and_only_for_its_frames(dataset: 
             check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(**bad)))
 
 
+def test_spread_gives_each_episode_its_own_share_of_the_gain_and_survives_a_resume(dataset: Path) -> None:
+    """spread: every world's wrench is the full-gain wrench times its episode's u in [1 - spread, 1], drawn anew
+    at its reset, carried by state_dict; spread 0 draws nothing, so other runs keep their random streams."""
+    cfg = variant_config("wristmimic", object_controller=ObjectControllerConfig(spread=1.0))
+    env = WristMimicEnv.from_file(dataset, SID, 8, cfg, SceneConfig(object_actuators=True), seed=3)
+    env.reset(start_frames=torch.full((8,), 5, dtype=torch.long))
+    u = env.object_scale.clone()
+    assert torch.all((u >= 0.0) & (u <= 1.0)) and u.unique().numel() == 8
+    env.object_gain = 0.5
+    scaled = env.object_wrench()
+    env.object_scale = torch.ones(8)
+    full = env.object_wrench()
+    assert torch.allclose(scaled, full * u[:, None, None], atol=1e-5) and full.abs().max() > 0
+    env.object_scale = u.clone()
+    hold = torch.tensor([1.0] + [0.0] * 7)  # a start hold still raises its world to the hold's gain
+    assert torch.allclose(env.object_wrench(hold)[0], full[0] / 0.5, atol=1e-4)
+    state = env.state_dict()
+    env.reset(start_frames=torch.full((8,), 5, dtype=torch.long))
+    assert not torch.equal(env.object_scale, u)  # a reset draws new shares
+    env.load_state_dict(state)
+    assert torch.equal(env.object_scale, u)
+    off = WristMimicEnv.from_file(
+        dataset, SID, 8, variant_config("wristmimic"), SceneConfig(object_actuators=True), seed=3
+    )
+    g = off._gen.get_state()
+    off.reset(start_frames=torch.full((8,), 5, dtype=torch.long))
+    assert torch.equal(off._gen.get_state(), g) and torch.all(off.object_scale == 1.0)
+    for bad in (-0.1, 1.5):
+        with pytest.raises(ValueError, match="spread"):
+            check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(spread=bad)))
+
+
 def test_training_records_the_start_hold_and_evaluation_never_applies_it(dataset: Path, tmp_path: Path) -> None:
     env_cfg = variant_config("wristmimic", object_controller=ObjectControllerConfig(start_hold_frames=6))
     ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))

@@ -163,6 +163,11 @@ class ObjectControllerConfig:
     """A separate gravity ramp (ManipTrans): the weight-carrying part of the wrench (m g) keeps the gain
     max(pose gain, 1 - frames / weight_zero_by_frames), reaching exactly zero after this many frames, so the
     policy learns to hold and move the object before it learns to lift it. 0: the weight follows the pose gain."""
+    spread: float = 0.0
+    """Training only: each episode scales the controller's gain (pose and weight) by its own u ~ U(1 - spread, 1),
+    drawn when the world resets, so at every stage of the curriculum some episodes get less help than the
+    batch's gain, down to none with spread 1, and the policy meets the takeover of the object throughout
+    instead of only as the gain falls. 0: every world gets the curriculum's gain."""
     start_hold_frames: int = 0
     """Training only: after a reset at a start frame > 0 the controller also holds that world's objects, at gain
     1 - steps / start_hold_frames (the larger of this and the curriculum's gain), so a start mid-carry, whose
@@ -447,6 +452,8 @@ def check_env_config(cfg: EnvConfig) -> None:
     if not st.depenetrate_tol >= 0:
         raise ValueError("starts: depenetrate_tol >= 0 (m)")
     oc = cfg.object_controller
+    if not 0.0 <= oc.spread <= 1.0:
+        raise ValueError("object_controller.spread must be in [0, 1]")
     if oc.start_hold_frames < 0 or (oc.start_hold_frames > 0 and not oc.enabled):
         raise ValueError("object_controller.start_hold_frames must be >= 0 and needs the controller enabled")
     ra = cfg.root_assist

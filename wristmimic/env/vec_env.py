@@ -275,6 +275,9 @@ class WristMimicEnv:
         self.object_weight_gain: float | None = None
         """Gain of the controller's weight support (``ObjectControllerConfig.weight_zero_by_frames``); None: the
         same as :attr:`object_gain`."""
+        self.object_scale = torch.ones(N, device=dev)
+        """(N,) each world's share of the controller's gain for its current episode
+        (``ObjectControllerConfig.spread``; ones when off)."""
         self.object_start_hold = 0
         """Frames after a reset at a start frame > 0 during which the object controller holds that world's objects
         (``ObjectControllerConfig.start_hold_frames``; 0: off). Set by training only."""
@@ -477,6 +480,10 @@ class WristMimicEnv:
             qpos, qvel = torch.where(use[:, None], bq, qpos), torch.where(use[:, None], bv, qvel)
             lineage |= use
         self._lineage = torch.where(mask, lineage, self._lineage)
+        spread = self.cfg.object_controller.spread
+        if spread > 0.0 and self.cfg.object_controller.enabled:  # draws only then: other runs keep their streams
+            u = 1.0 - spread * torch.rand(self.num_worlds, generator=self._gen, device=self.device)
+            self.object_scale = torch.where(mask, u, self.object_scale)
         self.backend.reset(mask, qpos, qvel)
         if self._delta_cols.numel():  # a reset holds the start state's finger angles
             start = qpos[:, self._hinge_qpos].to(torch.float32)
@@ -719,7 +726,13 @@ class WristMimicEnv:
         alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)
         gain: float | torch.Tensor = self.object_gain
         weight: float | torch.Tensor | None = self.object_weight_gain
-        if hold is not None:
+        if c.spread > 0.0:  # each episode's own share of the curriculum's gain, raised by any start hold
+            g = self.object_gain * self.object_scale
+            w = None if weight is None else weight * self.object_scale
+            if hold is not None:
+                g, w = torch.maximum(hold, g), None if w is None else torch.maximum(hold, w)
+            gain, weight = g[:, None, None], None if w is None else w[:, None, None]
+        elif hold is not None:
             gain = hold.clamp(min=self.object_gain)[:, None, None]
             weight = None if weight is None else hold.clamp(min=weight)[:, None, None]
         if weight is None:
@@ -891,6 +904,7 @@ class WristMimicEnv:
             "start_failures": None if self.starts is None else self.starts.failures.clone(),
             "lineage": self._lineage.clone(),
             "finger_hold": self._held.clone(),
+            "object_scale": self.object_scale.clone(),
             **({} if self.bank is None else self.bank.state_dict()),
             "sequence_id": self.scene.sequence_id,
             "num_worlds": self.num_worlds,
@@ -917,6 +931,8 @@ class WristMimicEnv:
             self._lineage[:] = state["lineage"]  # type: ignore[index]
         if state.get("finger_hold") is not None:
             self._held[:] = state["finger_hold"]  # type: ignore[index]
+        if state.get("object_scale") is not None:
+            self.object_scale[:] = state["object_scale"]  # type: ignore[index]
         if self.bank is not None:
             self.bank.load_state_dict(state)  # type: ignore[arg-type]
 
