@@ -369,6 +369,38 @@ def test_kinematic_grip_probe_moves_wrists_with_the_object_and_holds_the_object(
     assert held.max() < 1e-6  # the object sat on its reference for every frame
 
 
+def test_object_force_probe_drives_the_object_alone_and_reports_the_controllers_force(
+    dataset: Path, tmp_path: Path
+) -> None:
+    """scripts/object_force_probe.py: the humanoid cannot touch anything, the controller carries the object along its
+    reference (small errors on the synthetic box), its force holds the object up, the output covers every
+    frame, two runs agree bit for bit, and a stiffer controller or a bad option is what the flags say."""
+    probe = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "object_force_probe.py"))
+    args = probe["parser"]().parse_args([str(dataset), "--scene", SID])
+    env = probe["build"](args)
+    m = env.scene.model
+    humanoid = np.isin(m.geom_bodyid, env.scene.body_ids)
+    assert humanoid.any() and not (m.geom_contype[humanoid] | m.geom_conaffinity[humanoid]).any()
+    out = probe["probe"](env)
+    T = env.ref.num_frames
+    assert out["frames"] == list(range(1, T)) and len(out["force_n"]) == T - 1
+    F = np.asarray(out["force_n"])
+    mass = float(m.body_subtreemass[env.scene.dynamic_objects[0].body_id])
+    assert np.isfinite(F).all() and out["weight_n"] == pytest.approx(mass * 9.81)
+    assert np.median(F[:, 2]) > 0.5 * out["weight_n"]  # it holds the object up (gravity compensation)
+    free = probe["build"](args)
+    free.object_gain = 0.0  # the object left to itself: the controller is what keeps it on its reference
+    loose = probe["probe"](free)
+    assert not np.any(loose["force_n"]) and np.mean(out["pos_err_m"]) < 0.5 * np.mean(loose["pos_err_m"])
+    assert probe["probe"](probe["build"](args)) == out  # deterministic
+    stiff = probe["build"](probe["parser"]().parse_args([str(dataset), "--scene", SID, "--gain-scale", "4"]))
+    oc, base = stiff.cfg.object_controller, env.cfg.object_controller
+    assert (oc.kp, oc.kr) == (4 * base.kp, 4 * base.kr) and oc.kd == pytest.approx(2 * base.kd)
+    for bad in (["--set", "env.weights.op=1"], ["--gain-scale", "0"]):
+        with pytest.raises(SystemExit):
+            probe["build"](probe["parser"]().parse_args([str(dataset), "--scene", SID, *bad]))
+
+
 def test_sigma_schedule_sets_each_rollouts_sigma_and_the_policy_keeps_the_last(dataset: Path, tmp_path: Path) -> None:
     kw = dict(learn_std=False, min_std=0.0, final_std=0.01, std_anneal_start=32, std_anneal_end=96)
     start_run(_spec(dataset, 4, **kw), tmp_path / "run", nthread=1, progress=False)
