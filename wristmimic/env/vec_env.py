@@ -712,8 +712,8 @@ class WristMimicEnv:
 
     def object_wrench(self, hold: torch.Tensor | None = None) -> torch.Tensor:
         """(N, O, 6) virtual object controller: world force and local torque pulling each dynamic object toward
-        its reference at the frame being stepped to, times :attr:`object_gain` (gravity compensated); ``hold``
-        (N,): per-world gains that raise it (:meth:`start_hold_gain`)."""
+        its reference at the frame being stepped to, times :attr:`object_gain` x each world's :attr:`object_scale`
+        (gravity compensated); ``hold`` (N,): per-world gains that raise it (:meth:`start_hold_gain`)."""
         if not self.has_object_controller:
             raise RuntimeError("object_gain > 0 needs a scene built with SceneConfig(object_actuators=True)")
         c, r = self.cfg.object_controller, self.ref
@@ -724,17 +724,12 @@ class WristMimicEnv:
         pd = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin)
         rot = quat_to_rotvec(quat_mul(quat_conj(quat), r.obj_quat[f]))  # local frame
         alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)
-        gain: float | torch.Tensor = self.object_gain
-        weight: float | torch.Tensor | None = self.object_weight_gain
-        if c.spread > 0.0:  # each episode's own share of the curriculum's gain, raised by any start hold
-            g = self.object_gain * self.object_scale
-            w = None if weight is None else weight * self.object_scale
-            if hold is not None:
-                g, w = torch.maximum(hold, g), None if w is None else torch.maximum(hold, w)
-            gain, weight = g[:, None, None], None if w is None else w[:, None, None]
-        elif hold is not None:
-            gain = hold.clamp(min=self.object_gain)[:, None, None]
-            weight = None if weight is None else hold.clamp(min=weight)[:, None, None]
+        # per world: the episode's share of the curriculum's gain (ones without spread), raised by any start hold
+        gain = self.object_gain * self.object_scale
+        weight = None if self.object_weight_gain is None else self.object_weight_gain * self.object_scale
+        if hold is not None:
+            gain, weight = torch.maximum(hold, gain), None if weight is None else torch.maximum(hold, weight)
+        gain, weight = gain[:, None, None], None if weight is None else weight[:, None, None]
         if weight is None:
             return gain * torch.cat([self._obj_mass * (pd + self._gravity), self._obj_inertia * alpha], -1)
         acc = gain * pd + weight * self._gravity
