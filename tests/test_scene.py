@@ -109,9 +109,11 @@ def test_support_friction_governs_object_floor_contacts_but_not_the_hands(synth_
         return float(mus[0])
 
     with open_dataset(synth_files[0]) as ds:
-        base = build_scene(ds, "sub1_box_000")
-        low = build_scene(ds, "sub1_box_000", SceneConfig(support_friction=0.3))
+        base = build_scene(ds, "sub1_box_000", SceneConfig(hand_friction=None))  # the MJCF's own friction
+        low = build_scene(ds, "sub1_box_000", SceneConfig(support_friction=0.3, hand_friction=None))
         grip = build_scene(ds, "sub1_box_000", SceneConfig(hand_friction=2.0))
+        default = build_scene(ds, "sub1_box_000")
+        legacy = build_scene(ds, "sub1_box_000", scene_config_from_dict({"timestep": 1 / 120}))  # predates the field
         both = build_scene(ds, "sub1_box_000", SceneConfig(hand_friction=2.0, support_friction=0.3))
         for field in ("support_friction", "hand_friction"):
             for bad in (-0.1, float("nan")):
@@ -124,6 +126,9 @@ def test_support_friction_governs_object_floor_contacts_but_not_the_hands(synth_
     # hand_friction: the hands' grip changes, the object's friction with the floor does not
     assert contact_friction(grip, hand=True) == pytest.approx(2.0)
     assert contact_friction(grip, hand=False) == pytest.approx(1.0)
+    assert contact_friction(default, hand=True) == pytest.approx(2.0)  # the recipe's grip (SceneConfig's default)
+    assert contact_friction(default, hand=False) == pytest.approx(1.0)
+    assert contact_friction(legacy, hand=True) == pytest.approx(1.0)  # a run recorded before it keeps the MJCF's
     assert contact_friction(both, hand=True) == pytest.approx(2.0)
     assert contact_friction(both, hand=False) == pytest.approx(0.3)
 

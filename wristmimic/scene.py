@@ -100,10 +100,12 @@ class SceneConfig:
     hand_torsional_friction: float = 0.015
     """Torsional friction coefficient (m) of the hand geoms when ``hand_condim`` >= 4: about mu * (2/3) r for a
     contact patch of radius r ~ 2 cm (MuJoCo's default is 0.005)."""
-    hand_friction: float | None = None
+    hand_friction: float | None = 2.0
     """Sliding friction of the hand geoms (palms and fingers); None keeps the MJCF's (1 for SMPL-X). MuJoCo takes the
     larger of two geoms' frictions (or the higher priority's under ``support_friction``), so this sets the hands'
-    grip on objects without touching the objects' friction with the floor or their supports."""
+    grip on objects without touching the objects' friction with the floor or their supports. 2 by measurement
+    (2026-12-06, ``reports/hand_friction_20261206/``): MuJoCo's soft friction lets a held object creep, and with the
+    MJCF's 1 two of the thirteen synthetic recipe runs never held their box through the turn or the high lift."""
     object_damping: float = 0.01
     """Linear/angular damping of dynamic objects (free-joint dof damping)."""
     object_friction: float | None = None
@@ -262,6 +264,7 @@ LEGACY_SCENE_DEFAULTS: dict = {
     "hand_torsional_friction": 0.005,
     "contact_condim": None,
     "density": 1000.0,
+    "hand_friction": None,
 }
 """What a run's recorded ``scene_config`` meant when it predates a field (sliding friction only on the hands, MuJoCo's
 Newton solver)."""
