@@ -104,8 +104,8 @@ class SceneConfig:
     """Sliding friction of the hand geoms (palms and fingers); None keeps the MJCF's (1 for SMPL-X). MuJoCo takes the
     larger of two geoms' frictions (or the higher priority's under ``support_friction``), so this sets the hands'
     grip on objects without touching the objects' friction with the floor or their supports. 2 by measurement
-    (2026-12-06, ``reports/hand_friction_20261206/``): MuJoCo's soft friction lets a held object creep, and with the
-    MJCF's 1 two of the thirteen synthetic recipe runs never held their box through the turn or the high lift."""
+    (2026-12-06, ``reports/hand_friction_20261206/``): a squeeze lift then needs half the normal force, the recipe
+    finds it earlier, and all thirteen synthetic recipe runs pass 80 % where two did not with the MJCF's 1."""
     object_damping: float = 0.01
     """Linear/angular damping of dynamic objects (free-joint dof damping)."""
     object_friction: float | None = None
