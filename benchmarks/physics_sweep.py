@@ -2,7 +2,7 @@
 solver / timestep settings beside the defaults (Newton with 100 iterations at 1/120 s x 4), in the same process,
 with a fidelity check for each.
 
-Usage:  python benchmarks/physics_sweep.py [--dataset datasets/omomo.h5 --sequence sub2_largetable_000]
+Usage:  python benchmarks/physics_sweep.py [--dataset datasets/omomo.h5 --sequence sub2_largetable_000] [--only 1/60]
 
 For each scene (default: ``sub2_largetable_000`` and ``s110_move_kettle`` converted from the shared data) and each
 candidate :class:`~wristmimic.scene.SceneConfig` it prints:
@@ -50,6 +50,10 @@ CANDIDATES: dict[str, SceneConfig] = {
     "newton, 1/90 x 3": replace(NEWTON, timestep=1 / 90, substeps=3),
     "newton, 1/60 x 2": replace(NEWTON, timestep=1 / 60, substeps=2),
     "pgs 20 it, 1/60 x 2": replace(NEWTON, solver="pgs", iterations=20, timestep=1 / 60, substeps=2),
+    "newton, 1/60 x 2, refsafe off": replace(NEWTON, timestep=1 / 60, substeps=2, refsafe=False),
+    "pgs 20 it, 1/60 x 2, refsafe off": replace(
+        NEWTON, solver="pgs", iterations=20, timestep=1 / 60, substeps=2, refsafe=False
+    ),
 }
 
 
@@ -107,14 +111,22 @@ def main() -> None:
     ap.add_argument("--sequence")
     ap.add_argument("--worlds", type=int, default=256)
     ap.add_argument("--seconds", type=float, default=3.0)
+    ap.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        help="run the candidates whose name contains this (repeatable; the defaults always run)",
+    )
     args = ap.parse_args()
+    first = next(iter(CANDIDATES))
+    chosen = {k: v for k, v in CANDIDATES.items() if k == first or not args.only or any(o in k for o in args.only)}
     nthread = os.cpu_count() or 1
     with tempfile.TemporaryDirectory() as tmp:
         pairs = [(args.dataset, args.sequence)] if args.dataset else _default_datasets(Path(tmp))
         for path, sid in pairs:
             print(f"{sid} ({nthread} threads, {args.worlds} worlds)", flush=True)
             base = None
-            for name, cfg in CANDIDATES.items():
+            for name, cfg in chosen.items():
                 m, st, ctrl = _states(path, sid, cfg, args.worlds)
                 rate = raw_step_rate(m, st, ctrl, cfg.substeps, nthread, args.seconds) / cfg.substeps
                 base = base or rate

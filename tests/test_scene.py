@@ -338,3 +338,26 @@ def test_object_density_scales_mass_and_inertia_and_bad_values_are_refused(synth
         for bad in (0.0, -5.0, float("nan")):
             with pytest.raises(InputError, match="object_density"):
                 build_scene(ds, "sub1_box_000", SceneConfig(object_density=bad))
+
+
+def test_refsafe_false_keeps_the_contact_time_constant_at_a_long_timestep(synth_files: tuple[Path, Path]) -> None:
+    """MuJoCo's refsafe raises a contact's time constant to 2 x timestep: at 1/60 s the default 0.02 s becomes
+    0.033 s (stiffness K ~ 1 / timeconst^2, so 2.78x softer); ``refsafe=False`` keeps 0.02 s. At 1/120 s nothing
+    binds on this scene, so both settings give the same contacts."""
+
+    def stiffness(cfg: SceneConfig) -> np.ndarray:
+        sc = build_scene(ds, "sub1_box_000", cfg)
+        m, d = sc.model, mujoco.MjData(sc.model)
+        adr = m.jnt_qposadr[m.body_jntadr[sc.objects[0].body_id]]
+        d.qpos[adr : adr + 3] = [5.0, 5.0, 0.0]  # the box half into the floor, far from the humanoid
+        mujoco.mj_forward(m, d)
+        rows = np.isin(d.efc_type, [mujoco.mjtConstraint.mjCNSTR_CONTACT_PYRAMIDAL])
+        assert rows.any(), "no contact made"
+        return d.efc_KBIP[rows, 0]
+
+    with open_dataset(synth_files[0]) as ds:
+        assert not build_scene(ds, "sub1_box_000").model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_REFSAFE
+        long = {"timestep": 1 / 60, "substeps": 2}
+        safe, kept = stiffness(SceneConfig(**long)), stiffness(SceneConfig(**long, refsafe=False))
+        assert kept == pytest.approx(safe * (2 / 60 / 0.02) ** 2, rel=1e-6)
+        assert stiffness(SceneConfig(refsafe=False)) == pytest.approx(stiffness(SceneConfig()), rel=1e-9)

@@ -80,6 +80,17 @@ class SceneConfig:
     friction stiffer than the normal constraint (MuJoCo recommends them with elliptic cones)."""
     noslip_iterations: int = 0
     """MuJoCo's no-slip post-solver iterations (0: off, MuJoCo's default)."""
+    refsafe: bool = True
+    """MuJoCo's ``refsafe`` (its default): every contact's time constant (``solref[0]``, 0.02 s for SMPL-X's geoms)
+    is raised to at least twice the timestep. At 1/120 s that binds nothing but ParaHome's 0.015 s; at 1/60 s it
+    softens every contact to 0.033 s, and a squeeze grip then sags: with the body held on its reference
+    (``scripts/kinematic_grip_probe.py``, synth_default, frames 40-110, both hands, the reference's fingers) the box
+    lags its reference by 12.1 cm on average at 1/60 s, and by 12.1 cm at 1/120 s with the time constant set to
+    0.033 s, against 6.7 cm at 1/120 s. False keeps the MJCF's time constants at any timestep (5.5 cm at 1/60 s). With
+    it off, the recipe on synth_default at 1/60 s x 2 (400k frames, seed 0, 256 quick trials; 2026-12-07,
+    ``reports/timestep_refsafe_20261207/``) succeeds in 10.5 % with Newton (3.1 % with it on) and 21.9 % with PGS 20
+    iterations (0 % with it on), against 100 % at 1/120 s x 4: it explains part of why longer steps lose the grasp,
+    not all, so the default keeps MuJoCo's."""
     armature: float = 0.02
     density: float | None = None
     """Density (kg/m^3) of every humanoid geom; None keeps the MJCF's own. PHC's and SkillMimic's humanoids weigh
@@ -448,6 +459,8 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     spec.option.tolerance = float(cfg.tolerance)
     spec.option.impratio = float(cfg.impratio)
     spec.option.noslip_iterations = int(cfg.noslip_iterations)
+    if not cfg.refsafe:
+        spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_REFSAFE)
 
 
 def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None) -> Scene:
