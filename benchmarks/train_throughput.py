@@ -1,7 +1,7 @@
 """PPO training throughput against the raw MuJoCo step rate of the same scene, measured in the same run.
 
 Usage:  python benchmarks/train_throughput.py [--dataset datasets/omomo.h5 --sequence sub2_largetable_000]
-                                              [--preset cpu] [--iterations 5] [--compare] [--pgs]
+                                              [--preset cpu] [--iterations 5] [--compare] [--pgs] [--dt90]
 
 Prints the raw ``mj_step`` rate of the scene (plain ``mujoco.rollout`` on all cores from the training worlds'
 states and controls, the preset's number of worlds, no extra sensor pass: see ``physics_settings.py``), then for
@@ -9,7 +9,8 @@ the preset: training frames/s (collect + update), the split between rollout coll
 the ratio training frames/s / raw control frames/s. Target (issue #15): >= 0.7 on 2 cores.
 
 ``--compare`` also runs the physics settings before issue #15 in the same process and prints the ratio of the two
-training rates; ``--pgs`` also runs PGS with 20 iterations (see ``SceneConfig.solver``).
+training rates; ``--pgs`` also runs PGS with 20 iterations (see ``SceneConfig.solver``), ``--dt90`` Newton at
+1/90 s x 3 substeps (see ``physics_settings.DT90``).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from wristmimic.rl.config import preset, preset_env
 from wristmimic.rl.runner import Runner
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from physics_settings import BEFORE, NOW, PGS, Settings, dataset_or_shared_omomo, raw_step_rate  # noqa: E402
+from physics_settings import BEFORE, DT90, NOW, PGS, Settings, dataset_or_shared_omomo, raw_step_rate  # noqa: E402
 
 
 def bench(path: Path, sid: str, preset_name: str, iterations: int, num_envs: int | None, settings: Settings) -> float:
@@ -79,6 +80,7 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=5)
     ap.add_argument("--compare", action="store_true", help="also run the physics settings before issue #15")
     ap.add_argument("--pgs", action="store_true", help="also run PGS with 20 iterations (faster; fails the gate)")
+    ap.add_argument("--dt90", action="store_true", help="also run Newton at 1/90 s x 3 substeps")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         path = dataset_or_shared_omomo(args.dataset, args.sequence, tmp)
@@ -89,6 +91,9 @@ def main() -> None:
         if args.pgs:
             pgs = bench(path, args.sequence, args.preset, args.iterations, args.num_envs, PGS)
             print(f"pgs / now: training frames/s x{pgs / now:.2f}")
+        if args.dt90:
+            dt90 = bench(path, args.sequence, args.preset, args.iterations, args.num_envs, DT90)
+            print(f"1/90 s x 3 / now: training frames/s x{dt90 / now:.2f}")
 
 
 if __name__ == "__main__":
