@@ -361,3 +361,8 @@ def test_refsafe_false_keeps_the_contact_time_constant_at_a_long_timestep(synth_
         safe, kept = stiffness(SceneConfig(**long)), stiffness(SceneConfig(**long, refsafe=False))
         assert kept == pytest.approx(safe * (2 / 60 / 0.02) ** 2, rel=1e-6)
         assert stiffness(SceneConfig(refsafe=False)) == pytest.approx(stiffness(SceneConfig()), rel=1e-9)
+        from wristmimic.errors import InputError
+
+        for bad in (None, "no", 0):  # a recorded or --set value that is not a boolean is refused, not read as one
+            with pytest.raises(InputError, match="scene_config.refsafe"):
+                build_scene(ds, "sub1_box_000", scene_config_from_dict({"refsafe": bad}))

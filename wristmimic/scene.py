@@ -459,6 +459,8 @@ def _set_solver(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     spec.option.tolerance = float(cfg.tolerance)
     spec.option.impratio = float(cfg.impratio)
     spec.option.noslip_iterations = int(cfg.noslip_iterations)
+    if not isinstance(cfg.refsafe, bool):
+        raise InputError(None, "scene_config.refsafe", f"invalid value {cfg.refsafe!r}", "true or false")
     if not cfg.refsafe:
         spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_REFSAFE)
 
