@@ -366,6 +366,11 @@ class EnvConfig:
     clears the floor by this much and a standing foot's does not sink into it (:func:`wristmimic.env.grounding.
     lift_feet`). sub2_largetable_000 shuffles back with its swing toe 0-7 mm above the floor, and a standing toe
     up to 1.5 cm inside it: simulated, the toe drags (76-114 N of friction over 16 frames of the first step)."""
+    clear_hands: bool = False
+    """Bend each arm of the reference (after ``foot_clearance``) so that no palm lies more than 2 mm inside an
+    object, support or wall, the wrist keeping its reference orientation (:mod:`wristmimic.env.clearance`).
+    sub2_largetable_000's palms lie up to 19 mm inside the table top through the carry (111 frames move, by up
+    to 17 mm); tracking them means pushing the table away. Fingers are left as recorded."""
     residual_scale: float = 0.5
     """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
@@ -440,6 +445,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError("finger_synergy works with absolute or range finger actions, not finger_action=delta")
     if not 0.0 <= cfg.grip_squeeze < math.inf:
         raise ValueError(f"grip_squeeze must be a finite force >= 0 N, got {cfg.grip_squeeze}")
+    if not isinstance(cfg.clear_hands, bool):
+        raise ValueError(f"clear_hands must be true or false, got {cfg.clear_hands!r}")
     if not 0.0 <= cfg.foot_clearance <= 0.1:
         raise ValueError(f"foot_clearance must be in [0, 0.1] m, got {cfg.foot_clearance}")
     st = cfg.starts

@@ -71,6 +71,10 @@ class Reference:
     """Swing-foot clearance the legs were bent to (``load_reference(foot_clearance=...)``); 0: as recorded."""
     feet_lifted: int = 0
     """Foot-frames :func:`~wristmimic.env.grounding.lift_feet` changed."""
+    clear_hands: bool = False
+    """The arms were bent so that no palm lies inside an object (``load_reference(clear_hands=True)``)."""
+    palms_cleared: int = 0
+    """Frames :func:`~wristmimic.env.clearance.clear_palms` changed."""
 
     def to(self, device: str | torch.device) -> Reference:
         return Reference(**{k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in self.__dict__.items()})
@@ -84,12 +88,14 @@ def load_reference(
     max_frames: int | None = None,
     ground: bool = False,
     foot_clearance: float = 0.0,
+    clear_hands: bool = False,
 ) -> Reference:
     """Read the sequence of ``scene`` from ``ds`` and derive velocities, surface points and distances.
     ``max_frames`` keeps only the first frames (a short task, e.g. for tests); ``ground`` lowers the humanoid
     (root and bodies, not the objects) by its floor clearance; ``foot_clearance`` > 0 (m) then bends each leg so
     that a swinging foot clears the floor by that much and a standing one does not sink into it
-    (:func:`wristmimic.env.grounding.lift_feet`)."""
+    (:func:`wristmimic.env.grounding.lift_feet`); ``clear_hands`` then bends each arm so that no palm lies inside
+    an object (:func:`wristmimic.env.clearance.clear_palms`)."""
     seq = ds.sequence(scene.sequence_id)
     s = seq.load(None if max_frames is None else slice(0, max(int(max_frames), 2)))
     dz = 0.0
@@ -103,20 +109,30 @@ def load_reference(
     fps = float(ds.attrs.get("fps", 30.0))
     lifted = 0
     if foot_clearance > 0:
-        from wristmimic.env.grounding import forward_bodies, lift_feet
+        from wristmimic.env.grounding import lift_feet
 
         rp, rq = s.root_pos.astype(np.float64), s.root_quat.astype(np.float64)
         old = s.joint_angles.reshape(s.num_frames, -1).astype(np.float64)
         new, lifted = lift_feet(scene, rp, rq, old, foot_clearance, fps)
         if lifted:
-            p0, q0 = forward_bodies(scene, rp, rq, old)
-            p1, q1 = forward_bodies(scene, rp, rq, new)
-            s.body_pos = (s.body_pos + (p1 - p0)).astype(s.body_pos.dtype)
-            s.body_quat = quat_mul(quat_mul(q1, quat_conj(q0)), s.body_quat.astype(np.float64)).astype(
-                s.body_quat.dtype
-            )
-            s.joint_angles = new.reshape(s.joint_angles.shape).astype(s.joint_angles.dtype)
+            _repose(s, scene, old, new)
     dyn_idx = [k for k, o in enumerate(scene.objects) if o.dynamic]
+    cleared = 0
+    if clear_hands:
+        from wristmimic.env.clearance import clear_palms
+
+        old = s.joint_angles.reshape(s.num_frames, -1).astype(np.float64)
+        new, stats = clear_palms(
+            scene,
+            s.root_pos.astype(np.float64),
+            s.root_quat.astype(np.float64),
+            old,
+            s.object_pos[:, dyn_idx].astype(np.float64),
+            s.object_quat[:, dyn_idx].astype(np.float64),
+        )
+        cleared = stats.frames
+        if cleared:
+            _repose(s, scene, old, new)
     obj_pos = s.object_pos[:, dyn_idx].astype(np.float64)
     obj_quat = s.object_quat[:, dyn_idx].astype(np.float64)
     pts, owner = [], []
@@ -181,4 +197,19 @@ def load_reference(
         grounded_by=dz if ground else None,
         foot_clearance=float(foot_clearance) if foot_clearance > 0 else 0.0,
         feet_lifted=int(lifted),
+        clear_hands=bool(clear_hands),
+        palms_cleared=int(cleared),
     )
+
+
+def _repose(s, scene: Scene, old: np.ndarray, new: np.ndarray) -> None:
+    """Give the loaded sequence ``s`` the hinge angles ``new`` (T, J*3) instead of ``old``: each body's recorded
+    position and orientation moves by the change MuJoCo's forward kinematics gives (root kept)."""
+    from wristmimic.env.grounding import forward_bodies
+
+    rp, rq = s.root_pos.astype(np.float64), s.root_quat.astype(np.float64)
+    p0, q0 = forward_bodies(scene, rp, rq, old)
+    p1, q1 = forward_bodies(scene, rp, rq, new)
+    s.body_pos = (s.body_pos + (p1 - p0)).astype(s.body_pos.dtype)
+    s.body_quat = quat_mul(quat_mul(q1, quat_conj(q0)), s.body_quat.astype(np.float64)).astype(s.body_quat.dtype)
+    s.joint_angles = new.reshape(s.joint_angles.shape).astype(s.joint_angles.dtype)

@@ -134,6 +134,11 @@ class WristMimicEnv:
                 f"foot_clearance {self.cfg.foot_clearance} needs a reference loaded with that foot_clearance"
                 f" (this one: {reference.foot_clearance})"
             )
+        if self.cfg.clear_hands != reference.clear_hands:
+            raise ValueError(
+                f"clear_hands {self.cfg.clear_hands} needs a reference loaded with that clear_hands"
+                f" (this one: {reference.clear_hands})"
+            )
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
         if isinstance(backend, str):
@@ -404,7 +409,14 @@ class WristMimicEnv:
         with open_dataset(dataset) as ds:
             scene = build_scene(ds, sequence_id, scene_config)
             ref = load_reference(
-                ds, scene, cfg.ig_points, 0, max_frames, ground=cfg.ground_reference, foot_clearance=cfg.foot_clearance
+                ds,
+                scene,
+                cfg.ig_points,
+                0,
+                max_frames,
+                ground=cfg.ground_reference,
+                foot_clearance=cfg.foot_clearance,
+                clear_hands=cfg.clear_hands,
             )  # point subset: seed 0
         return cls(scene, ref, num_worlds, cfg, seed, backend, nthread, backend_options)
 
