@@ -2,7 +2,7 @@
 
 Usage:  python scripts/kinematic_grip_probe.py DATASET.h5 --scene SEQ --start F0 --stop F1
         [--hands right|left|both] [--samples 48] [--iters 10] [--sigma 0.5] [--synergy 0]
-        [--set scene_config.FIELD=VALUE ...] [--seed 0] [-o probe.json]
+        [--set scene_config.FIELD=VALUE | env.FIELD=VALUE ...] [--seed 0] [-o probe.json]
 
 Every non-finger degree of freedom of the humanoid (the root and every body and wrist hinge) follows the reference
 exactly: before each physics substep its position (interpolated between the two frames) and velocity are set, so
@@ -10,10 +10,11 @@ the wrists are where the mocap puts them whatever the load. The finger hinges ar
 start frame's reference angle plus an offset, and the objects are free. A cross-entropy search over the offsets of
 the chosen hands' finger hinges (``--samples`` per iteration, the cheapest eighth kept, noise ``--sigma`` rad
 annealed by 0.85) minimises the mean object-position error over the frames after ``--start``. ``--synergy S``
-searches one number per hand instead: S times it along the grasp synergy's closure (:mod:`wristmimic.env.synergy`).
+searches one number per hand instead: S times it along the grasp synergy's closure (:mod:`wristmimic.env.synergy`);
+with ``--per-finger`` one number per finger, the closure restricted to that finger's chain.
 
 ``--wrist-offset W`` also searches, per chosen hand, a constant offset (W m per unit, in the reference object's
-frame) applied while the reference hand touches the object, through the arm's hinges only (:class:`ArmOffsetMap`:
+frame) applied while the reference hand touches the object, through the arm's hinges only (:class:`wristmimic.env.clearance.ArmOffsetMap`:
 the damped pseudo-inverse of the wrist's 6-D Jacobian over the collar, shoulder, elbow and wrist hinges at the
 reference pose, ramped in and out over 10 frames), so the hand moves rigidly with the object and keeps its
 orientation to first order: can a corrected wrist path carry what the mocap one cannot? ``--hold F`` keeps the
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,104 +37,18 @@ import mujoco
 import numpy as np
 import torch
 
-from wristmimic.env.config import EnvConfig
+from wristmimic.env.clearance import arm_offset_map
+from wristmimic.env.config import EnvConfig, env_config_from_dict
 from wristmimic.env.synergy import closure_coefficients
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.rl.config import to_jsonable
 from wristmimic.rl.overrides import apply_overrides
-from wristmimic.rotations import quat_to_matrix
 from wristmimic.safe_io import atomic_output
 from wristmimic.scene import SceneConfig, scene_config_from_dict
 
 HANDS = {"left": ("left",), "right": ("right",), "both": ("left", "right")}
 SIDES = ("left", "right")
-ARM_BODIES = 4
-"""Bodies of the arm chain, from the wrist up: wrist, elbow, shoulder, collar."""
-
-
-@dataclass
-class ArmOffsetMap:
-    """Per frame and hand, the linear map from an object-frame wrist offset (m) to arm hinge angle changes."""
-
-    qpos_index: np.ndarray  # (2, A) qpos addresses of each hand's arm hinges
-    dof_index: np.ndarray  # (2, A) dof addresses of the same hinges
-    maps: np.ndarray  # (T, 2, A, 3) world-frame offset -> hinge change
-    obj_rot: np.ndarray  # (T, 3, 3) reference object rotation
-    weight: np.ndarray  # (T, 2) contact ramp per hand
-    fps: float
-
-    def deltas(self, offsets: np.ndarray) -> np.ndarray:
-        """(T, 2, A) hinge angle changes for ``offsets`` (2, 3): per hand, metres in the object's frame."""
-        world = np.einsum("tij,hj->thi", self.obj_rot, np.asarray(offsets, dtype=np.float64))
-        return self.weight[..., None] * np.einsum("thai,thi->tha", self.maps, world)
-
-    def apply(self, qpos: np.ndarray, qvel: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Refined copies of the reference ``qpos`` (T, nq) and ``qvel`` (T, nv): arm hinges moved, velocities of
-        the moved hinges changed by the offsets' finite difference."""
-        d = self.deltas(offsets)
-        q, v = qpos.copy(), qvel.copy()
-        q[:, self.qpos_index.reshape(-1)] += d.reshape(len(q), -1)
-        dv = np.gradient(d, axis=0) * self.fps if len(d) > 1 else np.zeros_like(d)
-        v[:, self.dof_index.reshape(-1)] += dv.reshape(len(v), -1)
-        return q, v
-
-
-def contact_ramp(touch: np.ndarray, ramp: int) -> np.ndarray:
-    """(T, H) weight: 1 where ``touch`` (T, H) is true, falling linearly to 0 over ``ramp`` frames away from it."""
-    T, H = touch.shape
-    t = np.arange(T)
-    out = np.zeros((T, H))
-    for h in range(H):  # two hands, once per sequence
-        frames = np.flatnonzero(touch[:, h])
-        if frames.size:
-            dist = np.abs(t[:, None] - frames[None, :]).min(axis=1)
-            out[:, h] = np.clip(1.0 - dist / max(ramp, 1), 0.0, 1.0)
-    return out
-
-
-def arm_chain(skel: Any, wrist_body: int) -> list[int]:
-    """Joint indices of the arm chain ending at ``wrist_body``: the wrist and its ``ARM_BODIES - 1`` ancestors."""
-    chain, b = [], wrist_body
-    for _ in range(ARM_BODIES):
-        j = np.flatnonzero(skel.joint_bodies == b)
-        if not j.size:
-            break
-        chain.append(int(j[0]))
-        b = int(skel.parents[b])
-    return chain
-
-
-def arm_offset_map(
-    scene: Any,
-    ref_qpos: np.ndarray,
-    obj_quat: np.ndarray,
-    touch: np.ndarray,
-    fps: float,
-    ramp: int = 10,
-    damping: float = 0.02,
-) -> ArmOffsetMap:
-    """The :class:`ArmOffsetMap` of a scene's humanoid along the reference ``ref_qpos`` (T, nq); ``obj_quat``
-    (T, 4) wxyz is the carried object's reference orientation, ``touch`` (T, 2) each hand's reference contact."""
-    m, skel, roles = scene.model, scene.skeleton, scene.humanoid.roles
-    d = mujoco.MjData(m)
-    wrists = [int(np.atleast_1d(roles[f"{s}_hand"])[0]) for s in SIDES]
-    chains = [arm_chain(skel, w) for w in wrists]
-    qidx = np.stack([scene.hinge_qposadr[c].reshape(-1) for c in chains])
-    didx = np.stack([scene.hinge_dofadr[c].reshape(-1) for c in chains])
-    T, A = len(ref_qpos), qidx.shape[1]
-    maps = np.zeros((T, 2, A, 3))
-    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
-    for t in range(T):  # preprocessing, once per sequence
-        d.qpos[:] = ref_qpos[t]
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        for h, w in enumerate(wrists):
-            mujoco.mj_jacBody(m, d, jacp, jacr, int(scene.body_ids[w]))
-            J = np.concatenate([jacp[:, didx[h]], jacr[:, didx[h]]])  # (6, A)
-            pinv = J.T @ np.linalg.inv(J @ J.T + damping**2 * np.eye(6))
-            maps[t, h] = pinv[:, :3]
-    return ArmOffsetMap(qidx, didx, maps, quat_to_matrix(obj_quat), contact_ramp(touch, ramp), fps)
 
 
 class KinematicReplay:
@@ -165,7 +79,7 @@ class KinematicReplay:
         self, finger_offset: np.ndarray, wrist_offsets: np.ndarray | None = None, hold_until: int = -1
     ) -> np.ndarray:
         """(stop - start,) object position error (m) at each frame reached, finger targets = start pose + offset,
-        each hand moved by ``wrist_offsets`` (2, 3) m in the object's frame while it touches (:class:`ArmOffsetMap`);
+        each hand moved by ``wrist_offsets`` (2, 3) m in the object's frame while it touches (:class:`~wristmimic.env.clearance.ArmOffsetMap`);
         the object is held on its reference (kinematic) before frame ``hold_until``, so the grasp forms on it."""
         m, d, q, v = self.m, self.d, self.qpos, self.qvel
         if wrist_offsets is not None:
@@ -192,10 +106,17 @@ class KinematicReplay:
 
 
 def build(args: argparse.Namespace) -> WristMimicEnv:
-    if any(not text.startswith("scene_config.") for text in args.set):
-        raise SystemExit("--set: only scene_config.FIELD overrides apply here")
-    cfg = apply_overrides({"scene_config": to_jsonable(SceneConfig())}, args.set)["scene_config"]
-    env = WristMimicEnv.from_file(args.dataset, args.scene, 1, EnvConfig(), scene_config_from_dict(cfg), nthread=1)
+    if any(not text.startswith(("scene_config.", "env.")) for text in args.set):
+        raise SystemExit("--set: only scene_config.FIELD and env.FIELD overrides apply here")
+    cfg = apply_overrides({"scene_config": to_jsonable(SceneConfig()), "env": to_jsonable(EnvConfig())}, args.set)
+    env = WristMimicEnv.from_file(
+        args.dataset,
+        args.scene,
+        1,
+        env_config_from_dict(cfg["env"]),
+        scene_config_from_dict(cfg["scene_config"]),
+        nthread=1,
+    )
     if not env.scene.dynamic_objects:
         raise SystemExit(f"error: {args.dataset}: scene {args.scene} has no dynamic object to carry")
     T = env.ref.num_frames
@@ -214,6 +135,14 @@ def probe(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
     if args.synergy > 0:
         closure = closure_coefficients(env.scene)[[("left", "right").index(h) for h in HANDS[args.hands]]]
         basis = args.synergy * closure  # (hands, H): one search dimension per hand
+        if args.per_finger:  # one search dimension per finger: the synergy's closure restricted to its chain
+            rows = []
+            for row, side in zip(basis, HANDS[args.hands], strict=True):
+                wrist = int(np.atleast_1d(roles[f"{side}_hand"])[0])
+                for child in skel.children(wrist):
+                    in_chain = np.repeat(np.isin(skel.joint_bodies, skel.subtree(child)), 3)
+                    rows.append(np.where(in_chain, row, 0.0))
+            basis = np.stack(rows)
     else:
         basis = np.eye(env.num_hinges)[chosen]  # one search dimension per finger hinge
     n_fingers = len(basis)
@@ -288,13 +217,16 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--sigma", type=float, default=0.5, help="initial noise (rad; synergy units with --synergy)")
     ap.add_argument("--synergy", type=float, default=0.0, help="> 0: search the grasp synergy (rad per unit)")
     ap.add_argument(
+        "--per-finger", action="store_true", help="with --synergy: one closure per finger instead of one per hand"
+    )
+    ap.add_argument(
         "--wrist-offset",
         type=float,
         default=0.0,
         help="> 0: also search each hand's offset in the object frame (m per unit)",
     )
     ap.add_argument("--hold", type=int, default=-1, help="hold the object on its reference before this frame")
-    ap.add_argument("--set", action="append", default=[], help="scene_config.FIELD=VALUE")
+    ap.add_argument("--set", action="append", default=[], help="scene_config.FIELD=VALUE or env.FIELD=VALUE")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("-o", "--out", type=Path, default=Path("grip_probe.json"))
     return ap

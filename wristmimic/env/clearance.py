@@ -24,6 +24,8 @@ import mujoco
 import numpy as np
 
 from wristmimic.env.grounding import _colliding, _pose
+from wristmimic.humanoid.skeleton import Skeleton
+from wristmimic.rotations import quat_to_matrix
 from wristmimic.scene import Scene
 
 
@@ -199,3 +201,116 @@ def clear_palms(
             shift = max(shift, float(np.linalg.norm(d.xpos[ids] - p0, axis=1).max()))
     changed = int((np.abs(out - joint_angles).max(axis=1) > 0).sum())
     return out, ClearanceStats(changed, float(before.max()), float(after.max()), shift)
+
+
+ARM_BODIES = 4
+"""Bodies of the arm chain, from the wrist up: wrist, elbow, shoulder, collar."""
+
+
+@dataclass
+class ArmOffsetMap:
+    """Per frame and hand, the linear map from an object-frame wrist offset (m) to arm hinge angle changes."""
+
+    qpos_index: np.ndarray  # (2, A) qpos addresses of each hand's arm hinges
+    dof_index: np.ndarray  # (2, A) dof addresses of the same hinges
+    maps: np.ndarray  # (T, 2, A, 3) world-frame offset -> hinge change
+    obj_rot: np.ndarray  # (T, 3, 3) reference object rotation
+    weight: np.ndarray  # (T, 2) contact ramp per hand
+    fps: float
+
+    def deltas(self, offsets: np.ndarray) -> np.ndarray:
+        """(T, 2, A) hinge angle changes for ``offsets`` (2, 3): per hand, metres in the object's frame."""
+        world = np.einsum("tij,hj->thi", self.obj_rot, np.asarray(offsets, dtype=np.float64))
+        return self.weight[..., None] * np.einsum("thai,thi->tha", self.maps, world)
+
+    def apply(self, qpos: np.ndarray, qvel: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Refined copies of the reference ``qpos`` (T, nq) and ``qvel`` (T, nv): arm hinges moved, velocities of
+        the moved hinges changed by the offsets' finite difference."""
+        d = self.deltas(offsets)
+        q, v = qpos.copy(), qvel.copy()
+        q[:, self.qpos_index.reshape(-1)] += d.reshape(len(q), -1)
+        dv = np.gradient(d, axis=0) * self.fps if len(d) > 1 else np.zeros_like(d)
+        v[:, self.dof_index.reshape(-1)] += dv.reshape(len(v), -1)
+        return q, v
+
+
+def contact_ramp(touch: np.ndarray, ramp: int) -> np.ndarray:
+    """(T, H) weight: 1 where ``touch`` (T, H) is true, falling linearly to 0 over ``ramp`` frames away from it."""
+    T, H = touch.shape
+    t = np.arange(T)
+    out = np.zeros((T, H))
+    for h in range(H):  # two hands, once per sequence
+        frames = np.flatnonzero(touch[:, h])
+        if frames.size:
+            dist = np.abs(t[:, None] - frames[None, :]).min(axis=1)
+            out[:, h] = np.clip(1.0 - dist / max(ramp, 1), 0.0, 1.0)
+    return out
+
+
+def arm_chain(skel: Skeleton, wrist_body: int) -> list[int]:
+    """Joint indices of the arm chain ending at ``wrist_body``: the wrist and its ``ARM_BODIES - 1`` ancestors."""
+    chain, b = [], wrist_body
+    for _ in range(ARM_BODIES):
+        j = np.flatnonzero(skel.joint_bodies == b)
+        if not j.size:
+            break
+        chain.append(int(j[0]))
+        b = int(skel.parents[b])
+    return chain
+
+
+def arm_offset_map(
+    scene: Scene,
+    ref_qpos: np.ndarray,
+    obj_quat: np.ndarray,
+    touch: np.ndarray,
+    fps: float,
+    ramp: int = 10,
+    damping: float = 0.02,
+) -> ArmOffsetMap:
+    """The :class:`ArmOffsetMap` of a scene's humanoid along the reference ``ref_qpos`` (T, nq); ``obj_quat``
+    (T, 4) wxyz is the carried object's reference orientation, ``touch`` (T, 2) each hand's reference contact."""
+    m, skel, roles = scene.model, scene.skeleton, scene.humanoid.roles
+    d = mujoco.MjData(m)
+    wrists = [int(np.atleast_1d(roles[f"{s}_hand"])[0]) for s in ("left", "right")]
+    chains = [arm_chain(skel, w) for w in wrists]
+    qidx = np.stack([scene.hinge_qposadr[c].reshape(-1) for c in chains])
+    didx = np.stack([scene.hinge_dofadr[c].reshape(-1) for c in chains])
+    T, A = len(ref_qpos), qidx.shape[1]
+    maps = np.zeros((T, 2, A, 3))
+    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    for t in range(T):  # preprocessing, once per sequence
+        d.qpos[:] = ref_qpos[t]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        for h, w in enumerate(wrists):
+            mujoco.mj_jacBody(m, d, jacp, jacr, int(scene.body_ids[w]))
+            J = np.concatenate([jacp[:, didx[h]], jacr[:, didx[h]]])  # (6, A)
+            pinv = J.T @ np.linalg.inv(J @ J.T + damping**2 * np.eye(6))
+            maps[t, h] = pinv[:, :3]
+    return ArmOffsetMap(qidx, didx, maps, quat_to_matrix(obj_quat), contact_ramp(touch, ramp), fps)
+
+
+def offset_wrists(
+    scene: Scene,
+    root_pos: np.ndarray,
+    root_quat: np.ndarray,
+    joint_angles: np.ndarray,
+    obj_quat: np.ndarray,
+    touch: np.ndarray,
+    offsets: np.ndarray,
+    fps: float,
+) -> np.ndarray:
+    """Hinge angles (T, J*3) with each hand moved by ``offsets`` (2, 3; left, right; m in the object's frame, whose
+    wxyz orientation per frame is ``obj_quat`` (T, 4)) while ``touch`` (T, 2) says the reference hand touches the
+    object: :class:`ArmOffsetMap` along the reference, as ``scripts/kinematic_grip_probe.py`` applies it."""
+    m = scene.model
+    qpos = np.tile(m.qpos0, (len(joint_angles), 1))
+    qpos[:, 0:3], qpos[:, 3:7] = root_pos, root_quat
+    qpos[:, scene.hinge_qposadr.reshape(-1)] = joint_angles
+    arms = arm_offset_map(scene, qpos, obj_quat, touch, fps)
+    col = {int(a): k for k, a in enumerate(scene.hinge_qposadr.reshape(-1))}
+    cols = np.array([col[int(a)] for a in arms.qpos_index.reshape(-1)])
+    out = np.array(joint_angles, dtype=np.float64, copy=True)
+    out[:, cols] += arms.deltas(offsets).reshape(len(out), -1)
+    return out

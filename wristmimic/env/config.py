@@ -371,6 +371,13 @@ class EnvConfig:
     object, support or wall, the wrist keeping its reference orientation (:mod:`wristmimic.env.clearance`).
     sub2_largetable_000's palms lie up to 19 mm inside the table top through the carry (111 frames move, by up
     to 17 mm); tracking them means pushing the table away. Fingers are left as recorded."""
+    wrist_offsets: tuple[float, ...] = ()
+    """m; six numbers (left x, y, z, right x, y, z) or none (off): each hand of the reference (after
+    ``clear_hands``) moved by that offset in the reference object's frame while the reference hand touches the
+    object, ramped in and out over 10 frames, through its arm's hinges (the damped pseudo-inverse of the wrist's
+    6-D Jacobian, so the hand keeps its orientation to first order; :class:`wristmimic.env.clearance.ArmOffsetMap`).
+    The offsets come from ``scripts/kinematic_grip_probe.py --wrist-offset``: a wrist path that, with the body on
+    the reference and the right finger closure, carries the object, where the mocap one does not."""
     residual_scale: float = 0.5
     """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
@@ -447,6 +454,13 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"grip_squeeze must be a finite force >= 0 N, got {cfg.grip_squeeze}")
     if not isinstance(cfg.clear_hands, bool):
         raise ValueError(f"clear_hands must be true or false, got {cfg.clear_hands!r}")
+    if len(cfg.wrist_offsets) not in (0, 6) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and abs(v) <= 0.2 for v in cfg.wrist_offsets
+    ):
+        raise ValueError(
+            f"wrist_offsets must be empty or six numbers within +-0.2 m (left x y z, right x y z), got"
+            f" {list(cfg.wrist_offsets)!r}"
+        )
     if not 0.0 <= cfg.foot_clearance <= 0.1:
         raise ValueError(f"foot_clearance must be in [0, 0.1] m, got {cfg.foot_clearance}")
     st = cfg.starts

@@ -75,6 +75,8 @@ class Reference:
     """The arms were bent so that no palm lies inside an object (``load_reference(clear_hands=True)``)."""
     palms_cleared: int = 0
     """Frames :func:`~wristmimic.env.clearance.clear_palms` changed."""
+    wrist_offsets: tuple[float, ...] = ()
+    """Object-frame wrist offsets applied (``load_reference(wrist_offsets=...)``); empty: none."""
 
     def to(self, device: str | torch.device) -> Reference:
         return Reference(**{k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in self.__dict__.items()})
@@ -89,13 +91,16 @@ def load_reference(
     ground: bool = False,
     foot_clearance: float = 0.0,
     clear_hands: bool = False,
+    wrist_offsets: tuple[float, ...] = (),
 ) -> Reference:
     """Read the sequence of ``scene`` from ``ds`` and derive velocities, surface points and distances.
     ``max_frames`` keeps only the first frames (a short task, e.g. for tests); ``ground`` lowers the humanoid
     (root and bodies, not the objects) by its floor clearance; ``foot_clearance`` > 0 (m) then bends each leg so
     that a swinging foot clears the floor by that much and a standing one does not sink into it
     (:func:`wristmimic.env.grounding.lift_feet`); ``clear_hands`` then bends each arm so that no palm lies inside
-    an object (:func:`wristmimic.env.clearance.clear_palms`)."""
+    an object (:func:`wristmimic.env.clearance.clear_palms`); ``wrist_offsets`` (left x y z, right x y z, m in the
+    first dynamic object's frame) then moves each hand while the reference hand touches the object
+    (:class:`wristmimic.env.clearance.ArmOffsetMap`)."""
     seq = ds.sequence(scene.sequence_id)
     s = seq.load(None if max_frames is None else slice(0, max(int(max_frames), 2)))
     dz = 0.0
@@ -133,6 +138,23 @@ def load_reference(
         cleared = stats.frames
         if cleared:
             _repose(s, scene, old, new)
+    if len(wrist_offsets):
+        from wristmimic.env.clearance import offset_wrists
+
+        if not dyn_idx:
+            raise ValueError(f"wrist_offsets: sequence {scene.sequence_id} has no dynamic object to offset from")
+        old = s.joint_angles.reshape(s.num_frames, -1).astype(np.float64)
+        new = offset_wrists(
+            scene,
+            s.root_pos.astype(np.float64),
+            s.root_quat.astype(np.float64),
+            old,
+            s.object_quat[:, dyn_idx[0]].astype(np.float64),
+            np.asarray(s.hand_contact, dtype=bool),
+            np.asarray(wrist_offsets, dtype=np.float64).reshape(2, 3),
+            fps,
+        )
+        _repose(s, scene, old, new)
     obj_pos = s.object_pos[:, dyn_idx].astype(np.float64)
     obj_quat = s.object_quat[:, dyn_idx].astype(np.float64)
     pts, owner = [], []
@@ -199,6 +221,7 @@ def load_reference(
         feet_lifted=int(lifted),
         clear_hands=bool(clear_hands),
         palms_cleared=int(cleared),
+        wrist_offsets=tuple(float(v) for v in wrist_offsets),
     )
 
 

@@ -139,6 +139,11 @@ class WristMimicEnv:
                 f"clear_hands {self.cfg.clear_hands} needs a reference loaded with that clear_hands"
                 f" (this one: {reference.clear_hands})"
             )
+        if tuple(self.cfg.wrist_offsets) != tuple(reference.wrist_offsets):
+            raise ValueError(
+                f"wrist_offsets {list(self.cfg.wrist_offsets)} need a reference loaded with those offsets"
+                f" (this one: {list(reference.wrist_offsets)})"
+            )
         self.num_worlds = int(num_worlds)
         self.seed = int(seed)
         if isinstance(backend, str):
@@ -417,6 +422,7 @@ class WristMimicEnv:
                 ground=cfg.ground_reference,
                 foot_clearance=cfg.foot_clearance,
                 clear_hands=cfg.clear_hands,
+                wrist_offsets=tuple(cfg.wrist_offsets),
             )  # point subset: seed 0
         return cls(scene, ref, num_worlds, cfg, seed, backend, nthread, backend_options)
 
