@@ -15,6 +15,7 @@ from wristmimic.env.config import EnvConfig, check_env_config
 from wristmimic.env.reference import load_reference
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.format import open_dataset
+from wristmimic.rotations import quat_to_matrix
 from wristmimic.scene import build_scene
 
 SEQ = "sub2_largetable_000"
@@ -95,3 +96,37 @@ def test_kettle_palms_touch_nothing_so_nothing_changes(parahome_h5: Path) -> Non
         scene = build_scene(ds, "s110_move_kettle", None)
         ref = load_reference(ds, scene, 64, 0, clear_hands=True)
     assert ref.clear_hands and ref.palms_cleared == 0
+
+
+def test_wrist_offsets_move_each_touching_hand_in_the_object_frame(
+    pair: tuple[WristMimicEnv, WristMimicEnv], omomo_h5: Path
+) -> None:
+    """The grip probe's arm offset map, applied to the reference: the wrist moves by R_obj @ offset where the
+    reference hand touches the object, keeps its orientation to first order, and nothing moves far from contact."""
+    old, _ = pair
+    off = (0.0, 0.0, 0.03, 0.0, -0.02, 0.01)
+    env = WristMimicEnv.from_file(omomo_h5, SEQ, 1, replace(old.cfg, wrist_offsets=off))
+    assert env.ref.wrist_offsets == off
+    wrists = [w for w, _ in arm_chains(env.scene)]
+    touch = old.ref.hand.numpy().astype(bool)
+    rot = quat_to_matrix(old.ref.obj_quat[:, 0].double().numpy())
+    moved = (env.ref.body_pos[:, wrists] - old.ref.body_pos[:, wrists]).double().numpy()
+    for h in range(2):
+        want = rot @ np.asarray(off[3 * h : 3 * h + 3])
+        frames = np.flatnonzero(touch[:, h])
+        assert len(frames) > 50
+        size = np.linalg.norm(off[3 * h : 3 * h + 3])
+        err = np.linalg.norm(moved[frames, h] - want[frames], axis=-1)
+        cos = (moved[frames, h] * want[frames]).sum(-1) / np.linalg.norm(moved[frames, h], axis=-1) / size
+        # a first-order map at the reference pose: on sub2 within 5 % (left) and 23 % (right) of the offset
+        assert np.median(err) < 0.25 * size and err.max() < 0.3 * size and cos.min() > 0.96
+    far = ~np.convolve(touch.any(1), np.ones(21), mode="same").astype(bool)  # > 10 frames from any contact
+    assert far[:10].all()
+    torch.testing.assert_close(env.ref.joint_angles[far], old.ref.joint_angles[far], rtol=0, atol=0)
+    q0, q1 = old.ref.body_quat[:, wrists].double(), env.ref.body_quat[:, wrists].double()
+    assert (2 * torch.acos((q0 * q1).sum(-1).abs().clamp(max=1.0))).max() < np.radians(5)
+    with pytest.raises(ValueError, match="wrist_offsets .* need a reference loaded with those offsets"):
+        WristMimicEnv(old.scene, old.ref, 1, replace(old.cfg, wrist_offsets=off))
+    for bad in ((0.0,) * 5, (0.0,) * 5 + (0.5,), (True,) * 6):
+        with pytest.raises(ValueError, match="wrist_offsets must be empty or six numbers"):
+            check_env_config(replace(EnvConfig(), wrist_offsets=bad))  # type: ignore[arg-type]

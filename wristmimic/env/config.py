@@ -375,7 +375,8 @@ class EnvConfig:
     """m; six numbers (left x, y, z, right x, y, z) or none (off): each hand of the reference (after
     ``clear_hands``) moved by that offset in the reference object's frame while the reference hand touches the
     object, ramped in and out over 10 frames, through its arm's hinges (the damped pseudo-inverse of the wrist's
-    6-D Jacobian, so the hand keeps its orientation to first order; :class:`wristmimic.env.clearance.ArmOffsetMap`).
+    6-D Jacobian at the reference pose, so the hand keeps its orientation to first order; a first-order map: on
+    sub2 the wrists move within 5-24 % of a 2-3 cm offset; :class:`wristmimic.env.clearance.ArmOffsetMap`).
     The offsets come from ``scripts/kinematic_grip_probe.py --wrist-offset``: a wrist path that, with the body on
     the reference and the right finger closure, carries the object, where the mocap one does not."""
     residual_scale: float = 0.5
