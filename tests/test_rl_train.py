@@ -319,12 +319,13 @@ def test_kinematic_grip_probe_holds_the_body_on_its_reference_and_searches_finge
     assert np.linalg.norm(d.xpos[wrist] - ref_wrist) < 0.01  # the wrist is where the reference puts it
     again = replay.errors(np.zeros(env.num_hinges))
     np.testing.assert_array_equal(errs, again)  # deterministic replays
-    for extra in (["--synergy", "1.0"], []):
+    dims = {"1": 2, "per": 10, "": int(env.finger_actions.sum())}  # per hand, per finger (5 a hand), per hinge
+    for extra in (["--synergy", "1.0"], ["--synergy", "1.0", "--per-finger"], []):
         a = probe["parser"]().parse_args(
             [str(dataset), "--scene", SID, "--start", "2", "--stop", "8", "--samples", "4", "--iters", "2", *extra]
         )
         out = probe["probe"](a, log=lambda _: None)
-        assert out["dimensions"] == (2 if extra else int(env.finger_actions.sum()))
+        assert out["dimensions"] == dims["per" if "--per-finger" in extra else "1" if extra else ""]
         assert len(out["best_errors"]) == 6 and out["best_mean_error"] <= out["iterations"][0]["nominal"]
     for bad in (["--start", "5", "--stop", "5"], ["--start", "0", "--stop", "999"]):
         with pytest.raises(SystemExit, match="--start"):
