@@ -9,7 +9,9 @@ exactly: before each physics substep its position (interpolated between the two 
 the wrists are where the mocap puts them whatever the load. The finger hinges are PD-driven to constant targets, the
 start frame's reference angle plus an offset, and the objects are free. A cross-entropy search over the offsets of
 the chosen hands' finger hinges (``--samples`` per iteration, the cheapest eighth kept, noise ``--sigma`` rad
-annealed by 0.85) minimises the mean object-position error over the frames after ``--start``. ``--synergy S``
+annealed by 0.85) minimises the mean object-position error over the frames after ``--start`` (plus
+``--penetration-weight`` times the deepest penetration of the kinematic body, palms and arms, into the object: a
+body of infinite strength can carry an object by pressing into it, which a policy's PD arms cannot). ``--synergy S``
 searches one number per hand instead: S times it along the grasp synergy's closure (:mod:`wristmimic.env.synergy`);
 with ``--per-finger`` one number per finger, the closure restricted to that finger's chain.
 
@@ -71,6 +73,16 @@ class KinematicReplay:
         self.obj_pose_q, self.obj_v = obj.qposadr + np.arange(7), obj.dofadr + np.arange(6)
         self.substeps = env.scene.config.substeps
         self.start, self.stop = start, stop
+        m = self.m
+        fingers_b = {int(env.scene.skeleton.joint_bodies[j]) for j in np.flatnonzero(fingers[::3])}
+        kinematic = np.zeros(m.nbody, dtype=bool)  # humanoid bodies the replay sets: all but the finger segments
+        kinematic[[int(env.scene.body_ids[b]) for b in range(len(env.scene.body_ids)) if b not in fingers_b]] = True
+        carried = np.zeros(m.nbody, dtype=bool)
+        carried[[int(m.jnt_bodyid[j]) for j in range(m.njnt) if m.jnt_qposadr[j] == obj.qposadr]] = True
+        self.kinematic_geom, self.object_geom = kinematic[m.geom_bodyid], carried[m.geom_bodyid]
+        self.penetration = np.zeros(0)
+        """(stop - start,) deepest penetration (m) of a kinematic humanoid geom into the object after each frame of
+        the last :meth:`errors` call: what a body of infinite strength forces, and a policy's PD arms cannot."""
         r = env.ref
         touch = r.hand.numpy().astype(bool)
         self.arms = arm_offset_map(env.scene, self.qpos, r.obj_quat[:, 0].numpy(), touch, float(r.fps))
@@ -88,7 +100,8 @@ class KinematicReplay:
         d.act[:] = 0.0
         mujoco.mj_forward(m, d)
         fingers = np.clip(q[self.start][self.hinge_q] + finger_offset, self.lo, self.hi)
-        out = []
+        out: list[float] = []
+        pen: list[float] = []
         for t in range(self.start, self.stop):
             for s in range(self.substeps):
                 a = (s + 1) / self.substeps
@@ -102,6 +115,10 @@ class KinematicReplay:
                     qo[3:] /= np.linalg.norm(qo[3:])
                     d.qpos[self.obj_pose_q], d.qvel[self.obj_v] = qo, v[t][self.obj_v]
             out.append(float(np.linalg.norm(d.qpos[self.obj_q] - q[t + 1][self.obj_q])))
+            g1, g2, dist = d.contact.geom1[: d.ncon], d.contact.geom2[: d.ncon], d.contact.dist[: d.ncon]
+            hit = (self.kinematic_geom[g1] & self.object_geom[g2]) | (self.kinematic_geom[g2] & self.object_geom[g1])
+            pen.append(float(max(0.0, -dist[hit].min())) if hit.any() else 0.0)
+        self.penetration = np.asarray(pen)
         return np.asarray(out)
 
 
@@ -154,21 +171,24 @@ def probe(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
         if args.wrist_offset > 0:
             offsets = np.zeros((2, 3))
             offsets[hands] = args.wrist_offset * xi[n_fingers:].reshape(len(hands), 3)
-        return replay.errors(xi[:n_fingers] @ basis, offsets, args.hold)
+        err = replay.errors(xi[:n_fingers] @ basis, offsets, args.hold)
+        return err + args.penetration_weight * replay.penetration, err, replay.penetration.copy()
 
     rng = np.random.default_rng(args.seed)
     mean, sigma = np.zeros(n_dims), args.sigma
     keep = max(args.samples // 8, 2)
     best: tuple[float, np.ndarray, np.ndarray] = (np.inf, mean, np.zeros(0))
+    best_pen = np.zeros(0)
     iterations = []
     for it in range(args.iters):
         x = mean + sigma * rng.standard_normal((args.samples, n_dims))
         x[0] = mean
-        errs = [run(xi) for xi in x]
-        cost = np.array([e.mean() for e in errs])
+        runs = [run(xi) for xi in x]
+        cost = np.array([r[0].mean() for r in runs])
         elite = np.argsort(cost)[:keep]
         if cost[elite[0]] < best[0]:
-            best = (float(cost[elite[0]]), x[elite[0]].copy(), errs[elite[0]])
+            best = (float(cost[elite[0]]), x[elite[0]].copy(), runs[elite[0]][1])
+            best_pen = runs[elite[0]][2]
         mean, sigma = x[elite].mean(axis=0), sigma * 0.85
         row = {
             "iteration": it,
@@ -185,6 +205,10 @@ def probe(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
         "best sample's object error (cm): "
         + " ".join(f"{f}:{100 * e:.1f}" for f, e in list(zip(frames, best[2], strict=True))[::4])
     )
+    log(
+        "its deepest kinematic penetration (mm): "
+        + " ".join(f"{f}:{1000 * e:.1f}" for f, e in list(zip(frames, best_pen, strict=True))[::4])
+    )
     result_offsets = {}
     if args.wrist_offset > 0:
         off = args.wrist_offset * best[1][n_fingers:].reshape(len(hands), 3)
@@ -199,8 +223,10 @@ def probe(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
         **result_offsets,
         "dimensions": n_dims,
         "iterations": iterations,
-        "best_mean_error": best[0],
+        "best_mean_error": float(best[2].mean()),
+        "best_cost": best[0],
         "best_errors": dict(zip(frames, best[2].tolist(), strict=True)),
+        "best_penetration": dict(zip(frames, best_pen.tolist(), strict=True)),
         "best_parameters": best[1].tolist(),
     }
 
@@ -216,6 +242,12 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--iters", type=int, default=10)
     ap.add_argument("--sigma", type=float, default=0.5, help="initial noise (rad; synergy units with --synergy)")
     ap.add_argument("--synergy", type=float, default=0.0, help="> 0: search the grasp synergy (rad per unit)")
+    ap.add_argument(
+        "--penetration-weight",
+        type=float,
+        default=0.0,
+        help="cost = object error + this x the deepest penetration of the kinematic body into the object (m/m)",
+    )
     ap.add_argument(
         "--per-finger", action="store_true", help="with --synergy: one closure per finger instead of one per hand"
     )
