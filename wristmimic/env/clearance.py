@@ -44,23 +44,13 @@ class ClearanceStats:
 
 
 def arm_chains(scene: Scene) -> list[tuple[int, list[int]]]:
-    """Per wrist: (its skeleton index, the skeleton bodies whose hinges move it: the wrist and its ancestors up to
-    and including the first whose parent branches, i.e. wrist, elbow, shoulder and collar on SMPL-X)."""
+    """Per wrist: (its skeleton index, the skeleton bodies of its :func:`arm_chain`, the hinges that move it: wrist,
+    elbow, shoulder and collar on SMPL-X)."""
     skel = scene.skeleton
-    out = []
-    for w in np.asarray(scene.humanoid.roles["wrists"]).tolist():
-        chain, b = [int(w)], int(w)
-        while True:
-            p = int(skel.parents[b])
-            if p < 0:
-                break
-            chain.append(p)
-            pp = int(skel.parents[p])
-            if pp < 0 or len(skel.children(pp)) > 1:
-                break
-            b = p
-        out.append((int(w), chain))
-    return out
+    return [
+        (int(w), [int(skel.joint_bodies[j]) for j in arm_chain(skel, int(w))])
+        for w in np.asarray(scene.humanoid.roles["wrists"]).tolist()
+    ]
 
 
 class _Palm:
