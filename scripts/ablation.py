@@ -4,7 +4,7 @@ Usage:  python scripts/ablation.py DATASET.h5 --scene synth_default --frames 400
         [--rows recipe,white_noise,latest_weights,absolute,fixed_ppo,no_curriculum,uniform_starts,training_sigma,
         sigma_anneal,update_1204]
         [--trials 256]
-        [--seed 0]
+        [--seed 0] [--nthread N]
 
 Each row trains with ``wristmimic.rl.start_run`` (the ``cpu`` preset with one lever changed) and is evaluated
 under the quick protocol with ``--trials`` frame-0 trials, as ``wristmimic evaluate`` does. Writes
@@ -87,24 +87,27 @@ EVAL_ONLY: dict[str, tuple[str, str, float | None]] = {
 another sigma of the sampled actions (0: the training sigma)."""
 
 
-def run_row(name: str, dataset: Path, scene: str, frames: int, seed: int, trials: int, work: Path) -> dict[str, Any]:
+def run_row(
+    name: str, dataset: Path, scene: str, frames: int, seed: int, trials: int, work: Path, nthread: int | None = None
+) -> dict[str, Any]:
     what, env_kw, ppo_kw = ROWS[name]
     env = replace(preset_env("cpu", "wristmimic"), **env_kw)
     ppo = replace(preset("cpu"), max_frames=frames, **ppo_kw)
     source, weights, sigma = EVAL_ONLY.get(name, (name, "deployed", None))
     if source != name and not (work / source / "run" / "checkpoint.pt").is_file():
-        run_row(source, dataset, scene, frames, seed, trials, work)
+        run_row(source, dataset, scene, frames, seed, trials, work, nthread)
     run_dir, eval_dir = work / source / "run", work / name / "eval"
     t0 = time.perf_counter()
     if not (eval_dir / "summary.json").is_file():
         if source == name:
             if run_dir.exists():
                 shutil.rmtree(run_dir)
-            start_run(TrainSpec(dataset, scene, "wristmimic", seed, "cpu", ppo, env=env), run_dir, progress=False)
+            spec = TrainSpec(dataset, scene, "wristmimic", seed, "cpu", ppo, env=env)
+            start_run(spec, run_dir, nthread=nthread, progress=False)
         policy = load_eval_policy(run_dir, weights)
         if sigma is not None:
             policy.policy.deploy_std = sigma
-        evaluate_policy(policy, load_protocol("quick"), eval_dir, trials=trials, progress=False)
+        evaluate_policy(policy, load_protocol("quick"), eval_dir, trials=trials, nthread=nthread, progress=False)
     s = json.loads((eval_dir / "summary.json").read_text())["scenes"][0]
     lo, hi = float(s["success_ci_low"]), float(s["success_ci_high"])
     m = pd.read_csv(run_dir / "metrics.csv")
@@ -151,6 +154,7 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=400_000)
     ap.add_argument("--trials", type=int, default=256)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--nthread", type=int, default=None, help="physics threads per run (default: all cores)")
     ap.add_argument("--rows", default=",".join(ROWS))
     ap.add_argument("--work", type=Path, default=Path("runs/ablation"))
     ap.add_argument("-o", "--out", type=Path, default=Path("reports/ablation_synth_default"))
@@ -162,7 +166,9 @@ def main() -> None:
     table = []
     for name in rows:
         print(f"[ablation] {name}: {ROWS[name][0]}", flush=True)
-        table.append(run_row(name, args.dataset, args.scene, args.frames, args.seed, args.trials, args.work))
+        table.append(
+            run_row(name, args.dataset, args.scene, args.frames, args.seed, args.trials, args.work, args.nthread)
+        )
         print(json.dumps(table[-1]), flush=True)
         keep = args.out / name
         keep.mkdir(parents=True, exist_ok=True)

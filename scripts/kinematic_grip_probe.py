@@ -25,7 +25,8 @@ object on its reference (kinematic) before frame F, so the grasp forms on it bef
 A success here (an error that stays small) says the reference's wrist path can carry the object and a policy's
 fingers have something to find; a failure says the wrists themselves must leave the reference. A diagnostic, not a
 training method: ``reports/README.md`` says what it found on the shared scenes. Prints one line per iteration and
-the best sample's error per frame; ``-o`` writes them as JSON.
+the best sample's error per frame; ``-o`` writes them as JSON, with the best finger targets as ``finger_grip``
+(``--set env.finger_grip=[...]`` centres a policy's finger actions on them while the hands touch).
 """
 
 from __future__ import annotations
@@ -86,6 +87,11 @@ class KinematicReplay:
         r = env.ref
         touch = r.hand.numpy().astype(bool)
         self.arms = arm_offset_map(env.scene, self.qpos, r.obj_quat[:, 0].numpy(), touch, float(r.fps))
+
+    def grip(self, finger_offset: np.ndarray) -> np.ndarray:
+        """The finger hinges' PD targets (rad, action order) that :meth:`errors` holds for ``finger_offset``:
+        ``env.finger_grip``'s value."""
+        return np.clip(self.qpos[self.start][self.hinge_q] + finger_offset, self.lo, self.hi)[self.fingers]
 
     def errors(
         self, finger_offset: np.ndarray, wrist_offsets: np.ndarray | None = None, hold_until: int = -1
@@ -228,6 +234,7 @@ def probe(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
         "best_errors": dict(zip(frames, best[2].tolist(), strict=True)),
         "best_penetration": dict(zip(frames, best_pen.tolist(), strict=True)),
         "best_parameters": best[1].tolist(),
+        "finger_grip": replay.grip(best[1][:n_fingers] @ basis).tolist(),
     }
 
 

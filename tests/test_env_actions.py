@@ -173,23 +173,29 @@ def test_delta_fingers_hold_the_start_pose_and_move_by_the_scale_each_step(datas
 
 
 @pytest.mark.parametrize(
-    "mode, gravity, fingers, synergy",
+    "mode, gravity, fingers, synergy, grip",
     [
-        ("residual", False, "absolute", 0.0),
-        ("residual", True, "absolute", 0.0),
-        ("absolute", False, "absolute", 0.0),
-        ("residual", False, "delta", 0.0),
-        ("residual", False, "range", 0.0),
-        ("residual", False, "absolute", 1.0),
+        ("residual", False, "absolute", 0.0, False),
+        ("residual", True, "absolute", 0.0, False),
+        ("absolute", False, "absolute", 0.0, False),
+        ("residual", False, "delta", 0.0, False),
+        ("residual", False, "range", 0.0, False),
+        ("residual", False, "absolute", 1.0, False),
+        ("residual", False, "absolute", 0.0, True),
     ],
 )
 def test_train_evaluate_and_view_map_actions_the_same_way(
-    dataset: Path, tmp_path: Path, mode: str, gravity: bool, fingers: str, synergy: float
+    dataset: Path, tmp_path: Path, mode: str, gravity: bool, fingers: str, synergy: float, grip: bool
 ) -> None:
     from wristmimic.evaluate.policy import load_eval_policy
 
     env_cfg = variant_config(
-        "wristmimic", action_mode=mode, gravity_feedforward=gravity, finger_action=fingers, finger_synergy=synergy
+        "wristmimic",
+        action_mode=mode,
+        gravity_feedforward=gravity,
+        finger_action=fingers,
+        finger_synergy=synergy,
+        finger_grip=_grip(dataset) if grip else (),
     )
     ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
     spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32), env=env_cfg)
@@ -206,10 +212,55 @@ def test_train_evaluate_and_view_map_actions_the_same_way(
         env.reset(start_frames=frames[: env.num_worlds])
         assert env.cfg.action_mode == mode and env.cfg.gravity_feedforward == gravity
         assert env.cfg.finger_action == fingers and env.cfg.finger_synergy == synergy
+        assert env.cfg.finger_grip == env_cfg.finger_grip
         assert env.action_size == env.num_hinges + (2 if synergy else 0) == policy.policy.action_size
         assert not env.has_object_controller  # the training-only object controller never reaches them
         n = env.num_worlds
         torch.testing.assert_close(env.action_to_ctrl(a[:n], frames[:n]), want[:n], rtol=0, atol=0)
+
+
+def _grip(dataset: Path) -> tuple[float, ...]:
+    """A grip with a different angle on every finger hinge (0.05 to 0.6 rad)."""
+    n = int(_env(dataset).finger_actions.sum())
+    return tuple(float(v) for v in np.linspace(0.05, 0.6, n))
+
+
+def test_finger_grip_centres_a_touching_hands_finger_actions_on_the_grip(dataset: Path) -> None:
+    from wristmimic.env.clearance import contact_ramp
+    from wristmimic.env.config import check_env_config
+
+    for bad in ({"finger_grip": (4.0,)}, {"finger_grip": (True,)}, {"finger_grip": (0.1,), "finger_action": "delta"}):
+        with pytest.raises(ValueError, match="finger_grip"):
+            check_env_config(EnvConfig(**bad))
+    with pytest.raises(ValueError, match="finger_grip has 3 angles"):
+        _env(dataset, finger_grip=(0.1, 0.2, 0.3))
+    grip = np.asarray(_grip(dataset))
+    plain, env = _env(dataset), _env(dataset, finger_grip=tuple(grip))
+    T, H = env.ref.num_frames, env.num_hinges
+    fingers = env.finger_actions.numpy()
+    skel, roles = env.scene.skeleton, env.scene.humanoid.roles
+    lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
+    weight = contact_ramp(env.ref.hand.numpy().astype(bool), 10)
+    assert (weight == 1).any() and (weight == 0).any()  # the clip has touching and free frames for the test
+    frames = torch.arange(T)
+    a = torch.linspace(-0.3, 0.3, T * H).reshape(T, H)
+    with_grip, without = env.action_to_ctrl(a, frames).numpy(), plain.action_to_ctrl(a, frames).numpy()
+    np.testing.assert_array_equal(with_grip[:, ~fingers], without[:, ~fingers])  # body and wrists untouched
+    offset, scale = env._offset.numpy(), env._scale.numpy()
+    target = np.zeros(H)
+    target[fingers] = grip
+    for h, side in enumerate(("left", "right")):
+        cols = fingers & np.repeat(np.isin(skel.joint_bodies, roles[f"{side}_hand"]), 3)
+        assert cols.sum() == fingers.sum() // 2
+        want = offset + weight[:, h : h + 1] * (target - offset) + scale * a.numpy()  # centre moves to the grip
+        np.testing.assert_allclose(with_grip[:, cols], np.clip(want, lo, hi)[:, cols], atol=1e-5)
+        free = weight[:, h] == 0
+        np.testing.assert_array_equal(with_grip[free][:, cols], without[free][:, cols])
+    held = env.action_to_ctrl(torch.zeros(T, H), frames).numpy()  # a = 0 holds the grip while both hands touch
+    both = (weight == 1).all(1)
+    np.testing.assert_allclose(
+        held[both][:, fingers], np.clip(target, lo, hi)[None, fingers].repeat(both.sum(), 0), atol=1e-6
+    )
 
 
 def test_grasp_synergy_adds_one_action_per_hand_that_curls_only_that_hands_fingers(dataset: Path) -> None:

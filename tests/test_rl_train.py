@@ -327,6 +327,15 @@ def test_kinematic_grip_probe_holds_the_body_on_its_reference_and_searches_finge
         out = probe["probe"](a, log=lambda _: None)
         assert out["dimensions"] == dims["per" if "--per-finger" in extra else "1" if extra else ""]
         assert len(out["best_errors"]) == 6 and out["best_mean_error"] <= out["iterations"][0]["nominal"]
+        grip = np.asarray(out["finger_grip"])  # the best finger targets, as env.finger_grip takes them
+        fingers = env.finger_actions.numpy()
+        lo, hi = env.scene.ctrl_range[fingers, 0], env.scene.ctrl_range[fingers, 1]
+        assert grip.shape == (fingers.sum(),) and (grip >= lo).all() and (grip <= hi).all()
+    text = "env.finger_grip=[" + ",".join(f"{v:.6f}" for v in grip) + "]"
+    with_grip = probe["build"](
+        probe["parser"]().parse_args([str(dataset), "--scene", SID, "--start", "2", "--stop", "8", "--set", text])
+    )
+    np.testing.assert_allclose(with_grip.cfg.finger_grip, grip, atol=1e-6)  # round trip through --set
     for bad in (["--start", "5", "--stop", "5"], ["--start", "0", "--stop", "999"]):
         with pytest.raises(SystemExit, match="--start"):
             probe["build"](probe["parser"]().parse_args([str(dataset), "--scene", SID, *bad]))

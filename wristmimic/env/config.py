@@ -379,6 +379,14 @@ class EnvConfig:
     sub2 the wrists move within 5-24 % of a 2-3 cm offset; :class:`wristmimic.env.clearance.ArmOffsetMap`).
     The offsets come from ``scripts/kinematic_grip_probe.py --wrist-offset``: a wrist path that, with the body on
     the reference and the right finger closure, carries the object, where the mocap one does not."""
+    finger_grip: tuple[float, ...] = ()
+    """rad; one PD-target angle per finger hinge (in action order, left hand then right as the actuators come) or
+    none (off): while the reference hand touches the object (ramped in and out over 10 frames, as
+    ``wrist_offsets``), that hand's finger actions are centred on this grip instead of the mid-range hand, so
+    a = 0 holds it. The grip is a synthesised one, not a finger reference: ``scripts/kinematic_grip_probe.py``
+    writes it (``finger_grip`` in its JSON) from a search over finger targets that carry the object with the body
+    on the reference (the issue's sampling-based warm start, here as an action prior). Absolute or range finger
+    actions only."""
     residual_scale: float = 0.5
     """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
@@ -462,6 +470,10 @@ def check_env_config(cfg: EnvConfig) -> None:
             f"wrist_offsets must be empty or six numbers within +-0.2 m (left x y z, right x y z), got"
             f" {list(cfg.wrist_offsets)!r}"
         )
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) and abs(v) <= math.pi for v in cfg.finger_grip):
+        raise ValueError(f"finger_grip must be empty or angles within +-pi rad, got {list(cfg.finger_grip)!r}")
+    if cfg.finger_grip and cfg.finger_action == "delta":
+        raise ValueError("finger_grip works with absolute or range finger actions, not finger_action=delta")
     if not 0.0 <= cfg.foot_clearance <= 0.1:
         raise ValueError(f"foot_clearance must be in [0, 0.1] m, got {cfg.foot_clearance}")
     st = cfg.starts

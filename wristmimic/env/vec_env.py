@@ -24,6 +24,7 @@ import torch
 from wristmimic.env import window as W
 from wristmimic.env.bodies import BodySets
 from wristmimic.env.carry import carry_offsets
+from wristmimic.env.clearance import contact_ramp
 from wristmimic.env.config import EnvConfig, check_env_config
 from wristmimic.env.depenetrate import DepenetrationStats, depenetrate_fingers
 from wristmimic.env.gravity import gravity_offsets
@@ -357,6 +358,9 @@ class WristMimicEnv:
                 carry = carry_offsets(self.scene, qpos, r.labels.detach().cpu().numpy(), hand)
                 self.carry_feedforward = torch.as_tensor(carry, dtype=torch.float32, device=self.device)
         self._held_offsets = self.gravity_feedforward + self.squeeze_feedforward + self.carry_feedforward
+        self._grip_center = self._finger_grip_table() if self.cfg.finger_grip else None
+        """(T, num_hinges) centre of the absolute targets per frame: the mid-range offset, moved to ``finger_grip``
+        on a touching hand's fingers (None: off)."""
         # bodies -> points distances are computed with the key bodies first: the IG reward reads (N, K, P) as a view
         key, P, B = self.sets.key, r.points.shape[1], self.scene.skeleton.num_bodies
         rest = torch.ones(B, dtype=torch.bool, device=dev)
@@ -638,9 +642,10 @@ class WristMimicEnv:
         a = action.clamp(-1.0, 1.0)
         grasp = a[:, self.num_hinges :]
         a = a[:, : self.num_hinges]
-        target = self._offset + self._scale * a
+        f = (self.frame + 1 if frames is None else frames).clamp(0, self.ref.num_frames - 1)
+        centre = self._offset if self._grip_center is None else self._grip_center[f]
+        target = centre + self._scale * a
         if self.cfg.action_mode == "residual":
-            f = (self.frame + 1 if frames is None else frames).clamp(0, self.ref.num_frames - 1)
             ref = self.ref.joint_angles[f] + self._ff_time * self.ref.joint_vel[f] + self.feedforward[f]
             ref = ref + self._held_offsets[f]
             residual = ref + self.cfg.residual_scale * a
@@ -650,6 +655,28 @@ class WristMimicEnv:
         if self._synergy is not None:
             target = target + grasp @ self._synergy
         return torch.maximum(torch.minimum(target, self._hi), self._lo)
+
+    def _finger_grip_table(self) -> torch.Tensor:
+        """(T, num_hinges): the absolute targets' centre per frame, ``finger_grip`` on each hand's finger hinges
+        weighted by that hand's reference contact (ramped over 10 frames, :func:`~wristmimic.env.clearance.contact_ramp`)."""
+        fingers = self.finger_actions.cpu().numpy()
+        grip = np.asarray(self.cfg.finger_grip, dtype=np.float64)
+        if len(grip) != int(fingers.sum()):
+            raise ValueError(
+                f"finger_grip has {len(grip)} angles; humanoid {self.scene.humanoid.name} has {int(fingers.sum())}"
+                " finger hinges"
+            )
+        skel, roles = self.scene.skeleton, self.scene.humanoid.roles
+        hinge_bodies = np.repeat(skel.joint_bodies, 3)
+        weight = contact_ramp(self.ref.hand.detach().cpu().numpy().astype(bool), 10)  # (T, 2): left, right
+        offset = self._offset.detach().cpu().numpy().astype(np.float64)
+        target = np.zeros(self.num_hinges)
+        target[fingers] = grip
+        centre = np.repeat(offset[None], self.ref.num_frames, axis=0)
+        for h, side in enumerate(("left", "right")):  # two hands
+            cols = fingers & np.isin(hinge_bodies, np.asarray(roles[f"{side}_hand"]))
+            centre[:, cols] += weight[:, h : h + 1] * (target[cols] - offset[cols])
+        return torch.as_tensor(centre, dtype=torch.float32, device=self.device)
 
     def step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
         """Advance every world one 30 Hz control step."""
