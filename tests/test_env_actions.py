@@ -240,8 +240,10 @@ def test_finger_grip_centres_a_touching_hands_finger_actions_on_the_grip(dataset
     fingers = env.finger_actions.numpy()
     skel, roles = env.scene.skeleton, env.scene.humanoid.roles
     lo, hi = env.scene.ctrl_range[:, 0], env.scene.ctrl_range[:, 1]
-    weight = contact_ramp(env.ref.hand.numpy().astype(bool), 10)
+    weight = 1.0 - contact_ramp(~env.ref.hand.numpy().astype(bool), 10)  # inside each contact, 10-frame ramps
     assert (weight == 1).any() and (weight == 0).any()  # the clip has touching and free frames for the test
+    touch = env.ref.hand.numpy().astype(bool)
+    assert (weight[~touch] == 0).all() and (weight[touch] > 0).all()  # only while the reference hand touches
     frames = torch.arange(T)
     a = torch.linspace(-0.3, 0.3, T * H).reshape(T, H)
     with_grip, without = env.action_to_ctrl(a, frames).numpy(), plain.action_to_ctrl(a, frames).numpy()

@@ -381,9 +381,10 @@ class EnvConfig:
     the reference and the right finger closure, carries the object, where the mocap one does not."""
     finger_grip: tuple[float, ...] = ()
     """rad; one PD-target angle per finger hinge (in action order, left hand then right as the actuators come) or
-    none (off): while the reference hand touches the object (ramped in and out over 10 frames, as
-    ``wrist_offsets``), that hand's finger actions are centred on this grip instead of the mid-range hand, so
-    a = 0 holds it. The grip is a synthesised one, not a finger reference: ``scripts/kinematic_grip_probe.py``
+    none (off): while the reference hand touches the object (ramped in over the first 10 frames of each contact
+    and out over its last 10), that hand's finger actions are centred on this grip instead of the mid-range hand,
+    so a = 0 holds it. (Ramped in over the 10 frames before contact, as ``wrist_offsets`` is, the curled fingers
+    met sub2's table top on the way down: every trial ended on ``wrist`` at 33 frames.) The grip is a synthesised one, not a finger reference: ``scripts/kinematic_grip_probe.py``
     writes it (``finger_grip`` in its JSON) from a search over finger targets that carry the object with the body
     on the reference (the issue's sampling-based warm start, here as an action prior). Absolute or range finger
     actions only."""

@@ -658,7 +658,8 @@ class WristMimicEnv:
 
     def _finger_grip_table(self) -> torch.Tensor:
         """(T, num_hinges): the absolute targets' centre per frame, ``finger_grip`` on each hand's finger hinges
-        weighted by that hand's reference contact (ramped over 10 frames, :func:`~wristmimic.env.clearance.contact_ramp`)."""
+        weighted by that hand's reference contact, ramped over the first and last 10 frames of each contact (inside
+        it: the hand reaches the object with the mid-range fingers and closes them once there)."""
         fingers = self.finger_actions.cpu().numpy()
         grip = np.asarray(self.cfg.finger_grip, dtype=np.float64)
         if len(grip) != int(fingers.sum()):
@@ -668,7 +669,7 @@ class WristMimicEnv:
             )
         skel, roles = self.scene.skeleton, self.scene.humanoid.roles
         hinge_bodies = np.repeat(skel.joint_bodies, 3)
-        weight = contact_ramp(self.ref.hand.detach().cpu().numpy().astype(bool), 10)  # (T, 2): left, right
+        weight = 1.0 - contact_ramp(~self.ref.hand.detach().cpu().numpy().astype(bool), 10)  # (T, 2): left, right
         offset = self._offset.detach().cpu().numpy().astype(np.float64)
         target = np.zeros(self.num_hinges)
         target[fingers] = grip
