@@ -232,6 +232,9 @@ def test_finger_grip_centres_a_touching_hands_finger_actions_on_the_grip(dataset
     for bad in ({"finger_grip": (4.0,)}, {"finger_grip": (True,)}, {"finger_grip": (0.1,), "finger_action": "delta"}):
         with pytest.raises(ValueError, match="finger_grip"):
             check_env_config(EnvConfig(**bad))
+    for bad in (-1, True, 2.5):
+        with pytest.raises(ValueError, match="finger_grip_from"):
+            check_env_config(EnvConfig(finger_grip_from=bad))
     with pytest.raises(ValueError, match="finger_grip has 3 angles"):
         _env(dataset, finger_grip=(0.1, 0.2, 0.3))
     grip = np.asarray(_grip(dataset))
@@ -258,11 +261,19 @@ def test_finger_grip_centres_a_touching_hands_finger_actions_on_the_grip(dataset
         np.testing.assert_allclose(with_grip[:, cols], np.clip(want, lo, hi)[:, cols], atol=1e-5)
         free = weight[:, h] == 0
         np.testing.assert_array_equal(with_grip[free][:, cols], without[free][:, cols])
-    held = env.action_to_ctrl(torch.zeros(T, H), frames).numpy()  # a = 0 holds the grip while both hands touch
-    both = (weight == 1).all(1)
+    left = fingers & np.repeat(np.isin(skel.joint_bodies, roles["left_hand"]), 3)
+    full = weight[:, 0] == 1
+    assert full.sum() >= 3
+    held = env.action_to_ctrl(torch.zeros(T, H), frames).numpy()  # a = 0 holds the grip while the hand touches
     np.testing.assert_allclose(
-        held[both][:, fingers], np.clip(target, lo, hi)[None, fingers].repeat(both.sum(), 0), atol=1e-6
+        held[full][:, left], np.clip(target, lo, hi)[None, left].repeat(full.sum(), 0), atol=1e-6
     )
+    first = int(np.flatnonzero(full)[0])  # from a later frame: off before it, then ramped in over 10 frames
+    late = _env(dataset, finger_grip=tuple(grip), finger_grip_from=first + 2).action_to_ctrl(a, frames).numpy()
+    np.testing.assert_array_equal(late[: first + 2], without[: first + 2])
+    ramp = np.clip((np.arange(T) - first - 1) / 10, 0.0, 1.0)[:, None]
+    want = offset + ramp * weight[:, :1] * (target - offset) + scale * a.numpy()
+    np.testing.assert_allclose(late[:, left], np.clip(want, lo, hi)[:, left], atol=1e-5)
 
 
 def test_grasp_synergy_adds_one_action_per_hand_that_curls_only_that_hands_fingers(dataset: Path) -> None:

@@ -383,11 +383,14 @@ class EnvConfig:
     """rad; one PD-target angle per finger hinge (in action order, left hand then right as the actuators come) or
     none (off): while the reference hand touches the object (ramped in over the first 10 frames of each contact
     and out over its last 10), that hand's finger actions are centred on this grip instead of the mid-range hand,
-    so a = 0 holds it. (Ramped in over the 10 frames before contact, as ``wrist_offsets`` is, the curled fingers
-    met sub2's table top on the way down: every trial ended on ``wrist`` at 33 frames.) The grip is a synthesised one, not a finger reference: ``scripts/kinematic_grip_probe.py``
+    so a = 0 holds it. The grip is a synthesised one, not a finger reference: ``scripts/kinematic_grip_probe.py``
     writes it (``finger_grip`` in its JSON) from a search over finger targets that carry the object with the body
     on the reference (the issue's sampling-based warm start, here as an action prior). Absolute or range finger
-    actions only."""
+    actions only. (Ramped in over the 10 frames before contact, as ``wrist_offsets`` is, the curled fingers met
+    sub2's table top on the way down: every trial ended on ``wrist`` at 33 frames.)"""
+    finger_grip_from: int = 0
+    """Reference frame before which ``finger_grip`` is off (ramped in over the 10 frames from it, also inside a
+    contact): the probe's ``--start``, from which the grip it found holds (there, its hands already on the object)."""
     residual_scale: float = 0.5
     """rad per unit action of a body or wrist hinge in ``residual`` mode (before clipping to the joint range)."""
     action_scale: float = 1.0
@@ -473,6 +476,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         )
     if not all(isinstance(v, int | float) and not isinstance(v, bool) and abs(v) <= math.pi for v in cfg.finger_grip):
         raise ValueError(f"finger_grip must be empty or angles within +-pi rad, got {list(cfg.finger_grip)!r}")
+    if isinstance(cfg.finger_grip_from, bool) or not isinstance(cfg.finger_grip_from, int) or cfg.finger_grip_from < 0:
+        raise ValueError(f"finger_grip_from must be a frame >= 0, got {cfg.finger_grip_from!r}")
     if cfg.finger_grip and cfg.finger_action == "delta":
         raise ValueError("finger_grip works with absolute or range finger actions, not finger_action=delta")
     if not 0.0 <= cfg.foot_clearance <= 0.1:

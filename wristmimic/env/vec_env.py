@@ -670,6 +670,9 @@ class WristMimicEnv:
         skel, roles = self.scene.skeleton, self.scene.humanoid.roles
         hinge_bodies = np.repeat(skel.joint_bodies, 3)
         weight = 1.0 - contact_ramp(~self.ref.hand.detach().cpu().numpy().astype(bool), 10)  # (T, 2): left, right
+        if self.cfg.finger_grip_from > 0:  # off before finger_grip_from, then a 10-frame ramp
+            since = np.arange(self.ref.num_frames) - self.cfg.finger_grip_from + 1
+            weight *= np.clip(since / 10, 0.0, 1.0)[:, None]
         offset = self._offset.detach().cpu().numpy().astype(np.float64)
         target = np.zeros(self.num_hinges)
         target[fingers] = grip
