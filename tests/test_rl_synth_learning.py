@@ -18,7 +18,10 @@ correlated noise (AR(1), rho 0.9; 2 threads, AMD EPYC): seeds 0, 1, 2 trained 63
 33.6 for zero actions (smallest gap 29.6 frames, against the 4-frame margin), object error 1.3, 1.5 and 2.4 cm.
 With the recipe of 2026-12-05 (one epoch per update, the rate adapted to the update's closed-form KL; 2 threads,
 Intel Xeon): seeds 0, 1, 2 trained 67.5, 110.8 and 71.7 frames against 33.6 for zero actions (smallest gap 33.9
-frames, against the 4-frame margin), object error 1.7, 2.7 and 1.9 cm.
+frames, against the 4-frame margin), object error 1.7, 2.7 and 1.9 cm. With the hands' friction 2 (the defaults of
+1bf6ccf; 1 thread, AMD EPYC, 2026-12-07): seeds 0, 1, 2 trained 137.1, 103.5 and 96.6 frames against 33.2 for zero
+actions (smallest gap 63.4 frames), object error 3.6, 2.6 and 2.9 cm
+(`reports/ablation_synth_default_20261207/slow_test_seeds.json`).
 """
 
 from __future__ import annotations
