@@ -1,5 +1,5 @@
 """The training-only curricula: the virtual object controller's wrench, its gain schedule down to exactly zero, its
-log column, and evaluation that never applies it; the same for the root assist."""
+log column, and evaluation that never applies it; the same for the root assist and the hands' adhesion."""
 
 from __future__ import annotations
 
@@ -9,16 +9,24 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import mujoco
+import numpy as np
 import pytest
 import torch
 
-from wristmimic.env.config import ObjectControllerConfig, RootAssistConfig, check_env_config, variant_config
+from wristmimic.env.config import (
+    HandAdhesionConfig,
+    ObjectControllerConfig,
+    RootAssistConfig,
+    check_env_config,
+    variant_config,
+)
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.evaluate.policy import load_eval_policy
 from wristmimic.evaluate.trials import make_env
 from wristmimic.rl import TrainSpec, preset, start_run
 from wristmimic.rl.checkpoint import load_checkpoint
-from wristmimic.rl.curriculum import ObjectCurriculum, root_assist_gain
+from wristmimic.rl.curriculum import ObjectCurriculum, hand_adhesion_gain, root_assist_gain
 from wristmimic.scene import SceneConfig
 
 from synthetic import converted_intermimic
@@ -270,3 +278,78 @@ def test_training_logs_the_root_gain_and_evaluation_never_applies_it(dataset: Pa
     assert config["env"]["root_assist"]["enabled"] and not config["scene_config"]["root_actuators"]
     env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
     assert not env.has_root_assist and env.root_gain == 0.0 and not env.cfg.root_assist.enabled
+
+
+def _adhesion_env(dataset: Path, n: int = 2) -> WristMimicEnv:
+    cfg = variant_config("wristmimic", wrist_resets=False, hand_adhesion=HandAdhesionConfig(enabled=True, force=15.0))
+    cfg = replace(cfg, termination=replace(cfg.termination, body_error=9.0, object_error=9.0, contact_lost_frames=999))
+    return WristMimicEnv.from_file(dataset, SID, n, cfg, SceneConfig(hand_adhesion=True), seed=0)
+
+
+def test_hand_adhesion_pulls_each_hand_body_only_while_its_reference_hand_touches(dataset: Path) -> None:
+    env = _adhesion_env(dataset)
+    m = env.scene.model
+    hand_bodies = {int(env.scene.body_ids[b]) for k in ("left_hand", "right_hand") for b in env.scene.humanoid.roles[k]}
+    assert env.has_hand_adhesion and {int(m.actuator_trnid[i, 0]) for i in env._adh_cols.tolist()} == hand_bodies
+    assert env.scene.model.nu == env.action_size + len(hand_bodies)
+    env.ref.hand[6] = torch.tensor([False, True])  # the clip's left hand touches throughout: swap one frame
+    touch = env.ref.hand.numpy()
+    env.adhesion_gain = 0.5
+    env.reset(start_frames=torch.tensor([4, 5]))  # stepping to frames 5 (left touches) and 6 (right only)
+    ctrl = env.prepare_step(torch.zeros(2, env.action_size))[:, env._adh_cols]
+    side = env._adh_side.numpy()
+    assert touch[5].tolist() == [True, False] and set(side.tolist()) == {0, 1}
+    expected = 15.0 * 0.5 * torch.tensor(touch[[5, 6]][:, side], dtype=torch.float32)
+    assert torch.equal(ctrl, expected) and set(ctrl.flatten().tolist()) == {0.0, 7.5}
+    env.adhesion_gain = 0.0  # a finished ramp leaves no pull behind
+    assert env.prepare_step(torch.zeros(2, env.action_size))[:, env._adh_cols].abs().sum() == 0
+
+
+def test_hand_adhesion_acts_through_contact_on_the_object(dataset: Path) -> None:
+    """With the hands touching the box, the adhesion actuators put a force on the box's free joint; without it none."""
+    env = _adhesion_env(dataset, 1)
+    f0 = int(env.ref.hand.numpy().all(-1).argmax())
+    env.adhesion_gain = 1.0
+    env.reset(start_frames=torch.tensor([f0]))
+    m, d = env.scene.model, mujoco.MjData(env.scene.model)
+    dof = env.scene.dynamic_objects[0].dofadr + np.arange(6)
+    pulls = []
+    for _ in range(6):
+        env.step(torch.zeros(1, env.action_size))
+        d.qpos[:], d.qvel[:] = env.backend.qpos[0].numpy(), env.backend.qvel[0].numpy()
+        d.ctrl[:] = env._ctrl[0].double().numpy()
+        mujoco.mj_forward(m, d)
+        hand = env._sim_hand(env.sim_state())[0]
+        pulls.append((bool(hand.any()), float(np.abs(d.qfrc_actuator[dof]).sum())))
+        d.ctrl[env._adh_cols.numpy()] = 0.0
+        mujoco.mj_forward(m, d)
+        assert np.abs(d.qfrc_actuator[dof]).sum() == 0.0  # only the adhesion acts on the box
+    assert any(touching and pull > 1.0 for touching, pull in pulls), pulls
+
+
+def test_hand_adhesion_gain_falls_linearly_to_exactly_zero_and_needs_its_actuators(dataset: Path) -> None:
+    cfg = HandAdhesionConfig(enabled=True, zero_by_frames=1000, min_gain=0.05)
+    assert [hand_adhesion_gain(cfg, f) for f in (0, 500, 940, 960, 5000)] == pytest.approx([1.0, 0.5, 0.06, 0, 0])
+    assert hand_adhesion_gain(replace(cfg, enabled=False), 0) == 0.0
+    env = WristMimicEnv.from_file(dataset, SID, 1, variant_config("wristmimic"), seed=0)
+    assert not env.has_hand_adhesion
+    env.reset()
+    env.adhesion_gain = 0.5
+    with pytest.raises(RuntimeError, match="hand_adhesion"):
+        env.step(torch.zeros(1, env.action_size))
+    with pytest.raises(ValueError, match="hand_adhesion"):
+        check_env_config(variant_config("wristmimic", hand_adhesion=HandAdhesionConfig(enabled=True, force=-1.0)))
+
+
+def test_training_logs_the_adhesion_gain_and_evaluation_never_applies_it(dataset: Path, tmp_path: Path) -> None:
+    env_cfg = variant_config("wristmimic", hand_adhesion=HandAdhesionConfig(enabled=True, zero_by_frames=32 * 4))
+    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 5), env=env_cfg)
+    start_run(spec, tmp_path / "run", progress=False)
+    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
+        gains = [float(r["curriculum/adhesion_gain"]) for r in csv.DictReader(f)]
+    assert gains == pytest.approx([1.0, 0.75, 0.5, 0.25, 0.0])  # the gain each iteration collected with
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["env"]["hand_adhesion"]["enabled"] and not config["scene_config"]["hand_adhesion"]
+    env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
+    assert not env.has_hand_adhesion and env.adhesion_gain == 0.0 and not env.cfg.hand_adhesion.enabled

@@ -156,6 +156,9 @@ class SceneConfig:
     root_actuators: bool = False
     """Six force/torque motors on the humanoid root's free joint (``rac_<k>``, world force, local torque) for the
     training-only root assist (``EnvConfig.root_assist``); like ``object_actuators``, training scenes only."""
+    hand_adhesion: bool = False
+    """An adhesion actuator on every hand body (``adh_<body>``, 1 N per unit of control, control 0-1000) for the
+    training-only contact guidance (``EnvConfig.hand_adhesion``); like ``object_actuators``, training scenes only."""
 
     @property
     def control_dt(self) -> float:
@@ -517,6 +520,13 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
             act.trntype = mujoco.mjtTrn.mjTRN_JOINT
             act.gear = [float(i == k) for i in range(6)]
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
+    if cfg.hand_adhesion:
+        for b in sorted({int(b) for side in ("left_hand", "right_hand") for b in hum.roles.get(side, [])}):
+            act = spec.add_actuator(name=f"adh_{skel.body_names[b]}", target=skel.body_names[b])
+            act.trntype = mujoco.mjtTrn.mjTRN_BODY
+            act.set_to_adhesion(1.0)
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.ctrlrange = [0.0, 1000.0]
     spec.add_numeric(name="wristmimic_control_substeps", data=[float(cfg.substeps)])
     spec.add_text(name="wristmimic_sequence", data=sequence_id)
     try:

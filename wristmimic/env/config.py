@@ -206,6 +206,28 @@ class RootAssistConfig:
 
 
 @dataclass(frozen=True)
+class HandAdhesionConfig:
+    """Training-only contact guidance: MuJoCo adhesion actuators on every hand body (palm and finger segments)
+    pull a touching hand body and what it touches together, so a hand that reaches the object while the reference
+    hand touches it can hold and move it before the fingers have learnt a grip. Each body's pull is ``force`` x the
+    curriculum's gain, only while that side's reference hand touches the object (at the frame being stepped to)
+    and only through contacts the body already has (no pull at a distance). The gain falls linearly from
+    ``initial_gain`` to exactly 0 at ``zero_by_frames``; evaluation and viewers never apply it (their scenes have no
+    adhesion actuators). Issue #14's "contact guidance" lever, beside the object controller and the gravity ramp."""
+
+    enabled: bool = False
+    """Add an adhesion actuator to every hand body of the training scene and drive them."""
+    force: float = 10.0
+    """Pull (N) of each touching hand body at full gain."""
+    initial_gain: float = 1.0
+    """Gain at frame 0 of training."""
+    zero_by_frames: int = 300_000
+    """Training frames at which the gain reaches 0 (linear)."""
+    min_gain: float = 0.05
+    """Below this the gain is 0."""
+
+
+@dataclass(frozen=True)
 class StartSamplingConfig:
     """Where training episodes start (besides the ``reset_frame0_prob`` share at frame 0)."""
 
@@ -337,6 +359,8 @@ class EnvConfig:
     """Training-only object curriculum (virtual object controller)."""
     root_assist: RootAssistConfig = field(default_factory=RootAssistConfig)
     """Training-only root assist (off)."""
+    hand_adhesion: HandAdhesionConfig = field(default_factory=HandAdhesionConfig)
+    """Training-only contact guidance: adhesion of the hand bodies to what they touch (off)."""
     feedforward: FeedforwardConfig = field(default_factory=FeedforwardConfig)
     """Open-loop PD-target offsets optimised before training (residual actions only)."""
     action_mode: str = "residual"
@@ -499,6 +523,12 @@ def check_env_config(cfg: EnvConfig) -> None:
     ra = cfg.root_assist
     if ra.enabled and (ra.zero_by_frames < 1 or not ra.initial_gain >= 0 or not ra.inertia > 0):
         raise ValueError("root_assist: zero_by_frames >= 1, initial_gain >= 0, inertia > 0")
+    ha = cfg.hand_adhesion
+    if ha.enabled and (ha.zero_by_frames < 1 or not ha.initial_gain >= 0 or not 0 <= ha.force <= 1000):
+        raise ValueError(
+            f"hand_adhesion: zero_by_frames >= 1, initial_gain >= 0 and force in [0, 1000] N, got"
+            f" {ha.zero_by_frames}, {ha.initial_gain}, {ha.force}"
+        )
 
 
 def variant_config(name: str, **overrides: object) -> EnvConfig:

@@ -261,6 +261,16 @@ class WristMimicEnv:
         self._rac_cols = idx(rac if self.has_root_assist else [])
         root_body = int(m.jnt_bodyid[m.actuator_trnid[rac[0], 0]]) if self.has_root_assist else 0
         self._root_mass = float(m.body_subtreemass[root_body])  # the whole humanoid
+        # contact guidance (training only): adhesion actuators on the hand bodies, if the scene has them
+        adh = [
+            i for i in range(m.nu) if (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or "").startswith("adh_")
+        ]
+        self.has_hand_adhesion = bool(adh)
+        self._adh_cols = idx(adh)
+        sides = [np.atleast_1d(scene.humanoid.roles.get(f"{h}_hand", [])) for h in ("left", "right")]
+        hand_of = {int(scene.body_ids[b]): k for k, bs in enumerate(sides) for b in bs}
+        self._adh_side = torch.tensor([hand_of[int(m.actuator_trnid[i, 0])] for i in adh], dtype=torch.long, device=dev)
+        """(n_adh,) 0 / 1: the hand (left / right) of each adhesion actuator's body."""
         self.feedforward = torch.zeros(reference.num_frames, self.num_hinges, device=dev)
         """(T, D) open-loop offsets added to the residual hinges' targets (:mod:`wristmimic.env.feedforward`);
         zero unless a run's optimised offsets are loaded."""
@@ -295,6 +305,9 @@ class WristMimicEnv:
         self.root_gain = 0.0
         """Gain of the root assist (0: off; ``EnvConfig.root_assist``). Set by training; needs a scene built with
         ``SceneConfig(root_actuators=True)``."""
+        self.adhesion_gain = 0.0
+        """Gain of the hands' adhesion (0: off; ``EnvConfig.hand_adhesion``). Set by training; needs a scene built
+        with ``SceneConfig(hand_adhesion=True)``."""
         self.on_step: Callable[[SimState, torch.Tensor], None] | None = None
         """Called in :meth:`step` with the state just reached (before any auto-reset) and the actions (a recorder:
         ``wristmimic.evaluate.export``); ``steps`` is then the frame reached, ``_ctrl`` the PD targets applied."""
@@ -705,6 +718,8 @@ class WristMimicEnv:
             self._ctrl[:, self._voc_cols.flatten()] = self.object_wrench(hold).flatten(1)
         if self.root_gain > 0.0:
             self._ctrl[:, self._rac_cols] = self.root_wrench()
+        if self.adhesion_gain > 0.0 or self._adh_cols.numel():
+            self._ctrl[:, self._adh_cols] = self.adhesion_ctrl()
         return self._ctrl
 
     def finish_step(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict]:
@@ -798,6 +813,16 @@ class WristMimicEnv:
         alpha = c.kr * rot + c.dr * (rv[:, 3:6] - qvel[:, 3:6])
         m = self.root_gain * self._root_mass
         return torch.cat([m * acc, (m * c.inertia) * alpha], -1)
+
+    def adhesion_ctrl(self) -> torch.Tensor:
+        """(N, n_adh) pull (N) of each hand body's adhesion actuator this step: ``hand_adhesion.force`` x
+        :attr:`adhesion_gain` where that side's reference hand touches the object at the frame being stepped to,
+        else 0."""
+        if self.adhesion_gain > 0.0 and not self.has_hand_adhesion:
+            raise RuntimeError("adhesion_gain > 0 needs a scene built with SceneConfig(hand_adhesion=True)")
+        f = (self.frame + 1).clamp(0, self.ref.num_frames - 1)
+        touch = self.ref.hand[f].to(torch.float32)[:, self._adh_side]  # (N, n_adh)
+        return (self.cfg.hand_adhesion.force * self.adhesion_gain) * touch
 
     def _sim_hand(self, s: SimState) -> torch.Tensor:
         """(N, 2) bool: any body of the left / right hand touches a dynamic object."""

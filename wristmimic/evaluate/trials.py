@@ -50,12 +50,13 @@ class TrialSettings:
 
 def eval_env_config(env: EnvConfig | dict[str, Any], early_termination: str = "run") -> EnvConfig:
     """The run's environment config for evaluation: every (auto-)reset at frame 0 from the reference (no state
-    bank, no root assist), no truncation before the end of the sequence; ``early_termination="base"`` turns the
-    wrist resets off."""
+    bank, no root assist, no adhesion), no truncation before the end of the sequence; ``early_termination="base"``
+    turns the wrist resets off."""
     if isinstance(env, dict):
         env = env_config_from_dict(env)
     cfg = replace(env, reset_frame0_prob=1.0, max_episode_frames=2**31 - 1, starts=replace(env.starts, bank=0.0))
     cfg = replace(cfg, root_assist=replace(cfg.root_assist, enabled=False))
+    cfg = replace(cfg, hand_adhesion=replace(cfg.hand_adhesion, enabled=False))
     return replace(cfg, wrist_resets=False) if early_termination == "base" else cfg
 
 

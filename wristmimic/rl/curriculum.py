@@ -1,5 +1,5 @@
 """Training curricula: the virtual object controller's gain (DexMachina), lowered to exactly zero, and the root
-assist's gain (:func:`root_assist_gain`, a linear ramp to zero).
+assist's and the hands' adhesion gains (:func:`root_assist_gain`, :func:`hand_adhesion_gain`, linear ramps to zero).
 
 The gain starts at ``initial_gain``. After every iteration whose episodes would survive a whole clip with
 probability above ``survival`` (projected from the iteration's termination rate per step), it is multiplied by
@@ -13,13 +13,22 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from wristmimic.env.config import ObjectControllerConfig, RootAssistConfig
+from wristmimic.env.config import HandAdhesionConfig, ObjectControllerConfig, RootAssistConfig
 
 
 def root_assist_gain(cfg: RootAssistConfig, frames: int) -> float:
     """Gain of the root assist after ``frames`` training frames: ``initial_gain`` falling linearly to 0 at
     ``zero_by_frames``; exactly 0 below ``min_gain`` and when disabled (a pure function of frames: resumes and
     reproductions need no state)."""
+    if not cfg.enabled:
+        return 0.0
+    gain = max(0.0, 1.0 - frames / cfg.zero_by_frames) * cfg.initial_gain
+    return 0.0 if gain < cfg.min_gain else gain
+
+
+def hand_adhesion_gain(cfg: HandAdhesionConfig, frames: int) -> float:
+    """Gain of the hands' adhesion after ``frames`` training frames: ``initial_gain`` falling linearly to 0 at
+    ``zero_by_frames``; exactly 0 below ``min_gain`` and when disabled (a pure function of frames)."""
     if not cfg.enabled:
         return 0.0
     gain = max(0.0, 1.0 - frames / cfg.zero_by_frames) * cfg.initial_gain

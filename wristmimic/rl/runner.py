@@ -28,7 +28,7 @@ from wristmimic.rl.checkpoint import (
     snapshot,
 )
 from wristmimic.rl.config import PPOConfig
-from wristmimic.rl.curriculum import ObjectCurriculum, root_assist_gain
+from wristmimic.rl.curriculum import ObjectCurriculum, hand_adhesion_gain, root_assist_gain
 from wristmimic.rl.logger import EpisodeStats, MetricsCsv, train_progress
 from wristmimic.rl.networks import ActorCritic, upgrade_state_dict
 from wristmimic.rl.ppo import PPO
@@ -123,6 +123,10 @@ class Runner:
         if self._root_assist and not env.has_root_assist:
             raise ValueError("the root assist needs a training scene with SceneConfig(root_actuators=True)")
         env.root_gain = root_assist_gain(env.cfg.root_assist, 0)
+        self._adhesion = env.cfg.hand_adhesion.enabled
+        if self._adhesion and not env.has_hand_adhesion:
+            raise ValueError("the hands' adhesion needs a training scene with SceneConfig(hand_adhesion=True)")
+        env.adhesion_gain = hand_adhesion_gain(env.cfg.hand_adhesion, 0)
         env.eval_info = False  # evaluation errors are computed by the periodic evaluation's own environment
         self._eval_env: WristMimicEnv | None = None
         self.stop_requested = False
@@ -157,6 +161,7 @@ class Runner:
                 while self.frames < max_frames and not self.stop_requested:
                     t0 = time.perf_counter()
                     gain, weight_gain, root_gain = self.env.object_gain, self.env.object_weight_gain, self.env.root_gain
+                    adhesion_gain = self.env.adhesion_gain
                     starts_before = self.env.start_counts.clone()
                     if self.cfg.final_std > 0.0:  # the sigma schedule (a fixed sigma: a buffer, saved with the policy)
                         self.policy.log_std_param.fill_(self.cfg.log_std_at(self.frames))
@@ -174,6 +179,7 @@ class Runner:
                     if self._weight_ramp:
                         self.env.object_weight_gain = self.curriculum.weight_gain(self.frames)
                     self.env.root_gain = root_assist_gain(self.env.cfg.root_assist, self.frames)
+                    self.env.adhesion_gain = hand_adhesion_gain(self.env.cfg.hand_adhesion, self.frames)
                     evaluation = self.periodic_eval() if self._eval_due() else {}
                     self._keep_best(evaluation)
                     self.seconds += time.perf_counter() - t0
@@ -184,6 +190,8 @@ class Runner:
                         row["curriculum/object_weight_gain"] = weight_gain
                     if self._root_assist:
                         row["curriculum/root_gain"] = root_gain
+                    if self._adhesion:
+                        row["curriculum/adhesion_gain"] = adhesion_gain
                     if self.env.bank is not None:  # share of this iteration's mid-clip starts restored from the bank
                         later, banked = (self.env.start_counts - starts_before).tolist()
                         row["starts/banked"] = banked / later if later else math.nan
@@ -522,6 +530,7 @@ class Runner:
         if self._weight_ramp:
             self.env.object_weight_gain = self.curriculum.weight_gain(self.frames)
         self.env.root_gain = root_assist_gain(self.env.cfg.root_assist, self.frames)
+        self.env.adhesion_gain = hand_adhesion_gain(self.env.cfg.hand_adhesion, self.frames)
         self.storage.step = int(state["storage_step"])
         self.metrics = MetricsCsv(self.run_dir / "metrics.csv", keep_until=self.iteration)
         self.saved_iteration = self.iteration

@@ -131,7 +131,10 @@ def _build(config: dict[str, Any], run_dir: Path, nthread: int | None, dataset_f
     scene_cfg = scene_config_from_dict(config["scene_config"])
     # the training scene alone carries the virtual object controller's motors (config.json records the user's)
     scene_cfg = replace(
-        scene_cfg, object_actuators=env_cfg.object_controller.enabled, root_actuators=env_cfg.root_assist.enabled
+        scene_cfg,
+        object_actuators=env_cfg.object_controller.enabled,
+        root_actuators=env_cfg.root_assist.enabled,
+        hand_adhesion=env_cfg.hand_adhesion.enabled,
     )
     physics = config.get("physics") or {"backend": "cpu"}  # runs from before backends existed: CPU
     options = {"device": physics["device"]} if physics["backend"] == "warp" and physics.get("device") else None
