@@ -254,30 +254,44 @@ def test_the_root_assist_holds_the_root_on_its_reference(dataset: Path) -> None:
     assert held < 0.25 * free, (held, free)  # measured: 5.1 cm against 25.8 cm
 
 
-def test_root_assist_gain_falls_linearly_to_exactly_zero_and_needs_its_motors(dataset: Path) -> None:
-    cfg = RootAssistConfig(enabled=True, zero_by_frames=1000, min_gain=0.05)
-    assert [root_assist_gain(cfg, f) for f in (0, 500, 940, 960, 5000)] == pytest.approx([1.0, 0.5, 0.06, 0, 0])
-    assert root_assist_gain(replace(cfg, enabled=False), 0) == 0.0
+AIDS = [  # (EnvConfig field, its config, log column, training-scene flag, env attributes: has, gain)
+    ("root_assist", RootAssistConfig, "root_gain", "root_actuators", ("has_root_assist", "root_gain")),
+    ("hand_adhesion", HandAdhesionConfig, "adhesion_gain", "hand_adhesion", ("has_hand_adhesion", "adhesion_gain")),
+]
+GAINS = {"root_assist": root_assist_gain, "hand_adhesion": hand_adhesion_gain}
+
+
+@pytest.mark.parametrize(("field", "config_cls", "column", "scene_flag", "attrs"), AIDS, ids=[a[0] for a in AIDS])
+def test_a_ramped_aid_falls_linearly_to_exactly_zero_and_needs_its_actuators(
+    dataset: Path, field: str, config_cls: type, column: str, scene_flag: str, attrs: tuple[str, str]
+) -> None:
+    cfg = config_cls(enabled=True, zero_by_frames=1000, min_gain=0.05)
+    gain = GAINS[field]
+    assert [gain(cfg, f) for f in (0, 500, 940, 960, 5000)] == pytest.approx([1.0, 0.5, 0.06, 0, 0])
+    assert gain(replace(cfg, enabled=False), 0) == 0.0
     env = WristMimicEnv.from_file(dataset, SID, 1, variant_config("wristmimic"), seed=0)
-    assert not env.has_root_assist
+    assert not getattr(env, attrs[0])
     env.reset()
-    env.root_gain = 0.5
-    with pytest.raises(RuntimeError, match="root_actuators"):
+    setattr(env, attrs[1], 0.5)
+    with pytest.raises(RuntimeError, match=scene_flag):
         env.step(torch.zeros(1, env.action_size))
 
 
-def test_training_logs_the_root_gain_and_evaluation_never_applies_it(dataset: Path, tmp_path: Path) -> None:
-    env_cfg = variant_config("wristmimic", root_assist=RootAssistConfig(enabled=True, zero_by_frames=32 * 4))
+@pytest.mark.parametrize(("field", "config_cls", "column", "scene_flag", "attrs"), AIDS, ids=[a[0] for a in AIDS])
+def test_training_logs_a_ramped_aid_and_evaluation_never_applies_it(
+    dataset: Path, tmp_path: Path, field: str, config_cls: type, column: str, scene_flag: str, attrs: tuple[str, str]
+) -> None:
+    env_cfg = variant_config("wristmimic", **{field: config_cls(enabled=True, zero_by_frames=32 * 4)})
     ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
     spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 5), env=env_cfg)
     start_run(spec, tmp_path / "run", progress=False)
     with open(tmp_path / "run" / "metrics.csv", newline="") as f:
-        gains = [float(r["curriculum/root_gain"]) for r in csv.DictReader(f)]
+        gains = [float(r[f"curriculum/{column}"]) for r in csv.DictReader(f)]
     assert gains == pytest.approx([1.0, 0.75, 0.5, 0.25, 0.0])  # the gain each iteration collected with
     config = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert config["env"]["root_assist"]["enabled"] and not config["scene_config"]["root_actuators"]
+    assert config["env"][field]["enabled"] and not config["scene_config"][scene_flag]
     env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
-    assert not env.has_root_assist and env.root_gain == 0.0 and not env.cfg.root_assist.enabled
+    assert not getattr(env, attrs[0]) and getattr(env, attrs[1]) == 0.0 and not getattr(env.cfg, field).enabled
 
 
 def _adhesion_env(dataset: Path, n: int = 2) -> WristMimicEnv:
@@ -303,6 +317,8 @@ def test_hand_adhesion_pulls_each_hand_body_only_while_its_reference_hand_touche
     assert torch.equal(ctrl, expected) and set(ctrl.flatten().tolist()) == {0.0, 7.5}
     env.adhesion_gain = 0.0  # a finished ramp leaves no pull behind
     assert env.prepare_step(torch.zeros(2, env.action_size))[:, env._adh_cols].abs().sum() == 0
+    with pytest.raises(ValueError, match="hand_adhesion"):
+        check_env_config(variant_config("wristmimic", hand_adhesion=HandAdhesionConfig(enabled=True, force=-1.0)))
 
 
 def test_hand_adhesion_acts_through_contact_on_the_object(dataset: Path) -> None:
@@ -325,31 +341,3 @@ def test_hand_adhesion_acts_through_contact_on_the_object(dataset: Path) -> None
         mujoco.mj_forward(m, d)
         assert np.abs(d.qfrc_actuator[dof]).sum() == 0.0  # only the adhesion acts on the box
     assert any(touching and pull > 1.0 for touching, pull in pulls), pulls
-
-
-def test_hand_adhesion_gain_falls_linearly_to_exactly_zero_and_needs_its_actuators(dataset: Path) -> None:
-    cfg = HandAdhesionConfig(enabled=True, zero_by_frames=1000, min_gain=0.05)
-    assert [hand_adhesion_gain(cfg, f) for f in (0, 500, 940, 960, 5000)] == pytest.approx([1.0, 0.5, 0.06, 0, 0])
-    assert hand_adhesion_gain(replace(cfg, enabled=False), 0) == 0.0
-    env = WristMimicEnv.from_file(dataset, SID, 1, variant_config("wristmimic"), seed=0)
-    assert not env.has_hand_adhesion
-    env.reset()
-    env.adhesion_gain = 0.5
-    with pytest.raises(RuntimeError, match="hand_adhesion"):
-        env.step(torch.zeros(1, env.action_size))
-    with pytest.raises(ValueError, match="hand_adhesion"):
-        check_env_config(variant_config("wristmimic", hand_adhesion=HandAdhesionConfig(enabled=True, force=-1.0)))
-
-
-def test_training_logs_the_adhesion_gain_and_evaluation_never_applies_it(dataset: Path, tmp_path: Path) -> None:
-    env_cfg = variant_config("wristmimic", hand_adhesion=HandAdhesionConfig(enabled=True, zero_by_frames=32 * 4))
-    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
-    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 5), env=env_cfg)
-    start_run(spec, tmp_path / "run", progress=False)
-    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
-        gains = [float(r["curriculum/adhesion_gain"]) for r in csv.DictReader(f)]
-    assert gains == pytest.approx([1.0, 0.75, 0.5, 0.25, 0.0])  # the gain each iteration collected with
-    config = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert config["env"]["hand_adhesion"]["enabled"] and not config["scene_config"]["hand_adhesion"]
-    env = make_env(load_eval_policy(tmp_path / "run").metadata, 2)
-    assert not env.has_hand_adhesion and env.adhesion_gain == 0.0 and not env.cfg.hand_adhesion.enabled

@@ -16,8 +16,8 @@ from typing import Any
 from wristmimic.env.config import HandAdhesionConfig, ObjectControllerConfig, RootAssistConfig
 
 
-def root_assist_gain(cfg: RootAssistConfig, frames: int) -> float:
-    """Gain of the root assist after ``frames`` training frames: ``initial_gain`` falling linearly to 0 at
+def linear_ramp_gain(cfg: RootAssistConfig | HandAdhesionConfig, frames: int) -> float:
+    """Gain of a training-only aid after ``frames`` training frames: ``initial_gain`` falling linearly to 0 at
     ``zero_by_frames``; exactly 0 below ``min_gain`` and when disabled (a pure function of frames: resumes and
     reproductions need no state)."""
     if not cfg.enabled:
@@ -26,13 +26,14 @@ def root_assist_gain(cfg: RootAssistConfig, frames: int) -> float:
     return 0.0 if gain < cfg.min_gain else gain
 
 
+def root_assist_gain(cfg: RootAssistConfig, frames: int) -> float:
+    """The root assist's gain after ``frames`` training frames (:func:`linear_ramp_gain`)."""
+    return linear_ramp_gain(cfg, frames)
+
+
 def hand_adhesion_gain(cfg: HandAdhesionConfig, frames: int) -> float:
-    """Gain of the hands' adhesion after ``frames`` training frames: ``initial_gain`` falling linearly to 0 at
-    ``zero_by_frames``; exactly 0 below ``min_gain`` and when disabled (a pure function of frames)."""
-    if not cfg.enabled:
-        return 0.0
-    gain = max(0.0, 1.0 - frames / cfg.zero_by_frames) * cfg.initial_gain
-    return 0.0 if gain < cfg.min_gain else gain
+    """The hands' adhesion gain after ``frames`` training frames (:func:`linear_ramp_gain`)."""
+    return linear_ramp_gain(cfg, frames)
 
 
 class ObjectCurriculum:
