@@ -15,6 +15,7 @@ from wristmimic.convert.skillmimic_parahome import convert_skillmimic_parahome
 from wristmimic.env import window as W
 from wristmimic.env.config import VARIANTS, EnvConfig, TerminationConfig, variant_config
 from wristmimic.env.vec_env import WristMimicEnv
+from wristmimic.scene import SceneConfig
 
 from synthetic import write_intermimic_folder, write_parahome_folder
 
@@ -245,6 +246,22 @@ def test_real_scenes_step(which: str, omomo_h5: Path, parahome_h5: Path) -> None
         assert torch.isfinite(obs).all()
         rewards.append(r.mean().item())
     assert min(rewards) > 0.05, rewards
+    env.close()
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("which", ["omomo", "parahome"])
+def test_real_training_scenes_build_with_every_training_only_actuator(
+    which: str, omomo_h5: Path, parahome_h5: Path
+) -> None:
+    """The object controller's and root assist's motors and the hands' adhesion actuators compile on both real
+    humanoids (ParaHome's MJCF gives actuators a negative default control range, which adhesion refuses)."""
+    path, sid = (omomo_h5, "sub2_largetable_000") if which == "omomo" else (parahome_h5, "s110_move_kettle")
+    sc = SceneConfig(object_actuators=True, root_actuators=True, hand_adhesion=True)
+    env = WristMimicEnv.from_file(path, sid, num_worlds=1, config=EnvConfig(), scene_config=sc, nthread=1)
+    hands = [b for k in ("left_hand", "right_hand") for b in env.scene.humanoid.roles[k]]
+    assert env.has_object_controller and env.has_root_assist and env._adh_cols.numel() == len(hands) > 2
+    assert (env.scene.model.actuator_ctrlrange[env._adh_cols.numpy()] == [0.0, 1000.0]).all()
     env.close()
 
 

@@ -524,9 +524,9 @@ def build_scene(ds: Dataset, sequence_id: str, config: SceneConfig | None = None
         for b in sorted({int(b) for side in ("left_hand", "right_hand") for b in hum.roles.get(side, [])}):
             act = spec.add_actuator(name=f"adh_{skel.body_names[b]}", target=skel.body_names[b])
             act.trntype = mujoco.mjtTrn.mjTRN_BODY
-            act.set_to_adhesion(1.0)
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            act.ctrlrange = [0.0, 1000.0]
+            act.ctrlrange = [0.0, 1000.0]  # before set_to_adhesion: it refuses a negative range (an MJCF default's)
+            act.set_to_adhesion(1.0)
     spec.add_numeric(name="wristmimic_control_substeps", data=[float(cfg.substeps)])
     spec.add_text(name="wristmimic_sequence", data=sequence_id)
     try:
