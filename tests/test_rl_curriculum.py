@@ -87,6 +87,33 @@ def test_gain_decays_on_survival_and_reaches_exactly_zero_by_the_frame_cap() -> 
     assert ObjectCurriculum(replace(cfg, enabled=False), 101).gain == 0.0
 
 
+def test_recover_dials_the_gain_back_when_episodes_stay_short_and_zero_stays_zero() -> None:
+    """recover: survival below it divides the gain by decay (up to initial_gain, under the frame cap); between
+    recover and survival the gain holds; off (0) the gain only falls, as before; bad thresholds are refused."""
+    cfg = ObjectControllerConfig(decay=0.5, survival=0.5, recover=0.2, min_gain=0.1, zero_by_frames=10_000)
+    cur = ObjectCurriculum(cfg, num_frames=101)
+    survive, short = dict(terminations=0, world_steps=100), dict(terminations=100, world_steps=100)
+    assert cur.update(**survive, frames=0) == pytest.approx(0.5)
+    assert cur.update(**survive, frames=0) == pytest.approx(0.25)
+    assert cur.update(**short, frames=0) == pytest.approx(0.5)  # dialled back
+    assert cur.update(**short, frames=0) == pytest.approx(1.0)
+    assert cur.update(**short, frames=0) == pytest.approx(1.0)  # never above initial_gain
+    assert cur.update(**short, frames=5_000) == pytest.approx(0.5)  # nor above the frame cap
+    middle = dict(terminations=1, world_steps=100)  # survival 0.99^100 = 0.37: between recover and survival
+    assert 0.2 < cur.projected_survival(**middle) < 0.5
+    assert cur.update(**middle, frames=5_000) == pytest.approx(0.5)  # holds
+    for _ in range(4):  # 0.5 (its adaptive 1.0 held by the cap) -> 0.5, 0.25, 0.125, 0.0625 < min_gain
+        cur.update(**survive, frames=5_000)
+    assert cur.gain == 0.0 and cur.zero_frames == 5_000
+    assert cur.update(**short, frames=5_000) == 0.0  # zero stays zero
+    off = ObjectCurriculum(replace(cfg, recover=0.0), 101)
+    off.update(**survive, frames=0)
+    assert off.update(**short, frames=0) == pytest.approx(0.5)  # without recover the gain never rises
+    for bad in (dict(recover=0.5), dict(recover=-0.1), dict(decay=0.0), dict(decay=1.5)):
+        with pytest.raises(ValueError, match="recover|decay"):
+            check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(**bad)))
+
+
 def test_training_logs_the_gain_records_when_it_reached_zero_and_evaluation_never_applies_it(
     dataset: Path, tmp_path: Path
 ) -> None:

@@ -154,6 +154,11 @@ class ObjectControllerConfig:
     """The gain is multiplied by this after every iteration whose episodes pass ``survival``."""
     survival: float = 0.5
     """Decay when the iteration's projected full-clip survival (1 - terminations / steps)^(T - 1) is above this."""
+    recover: float = 0.0
+    """Dial the help back (DexMachina): after every iteration whose projected full-clip survival is below this,
+    the gain is divided by ``decay`` (at most ``initial_gain``, and never above the frame cap), so over a long run
+    the gain settles where the policy just survives and falls to zero only as the policy takes the object over.
+    Must be below ``survival``; 0: off (the gain only falls). A gain that reached exactly zero stays zero."""
     min_gain: float = 0.05
     """A gain below this becomes exactly zero."""
     zero_by_frames: int = 150_000
@@ -520,6 +525,10 @@ def check_env_config(cfg: EnvConfig) -> None:
     oc = cfg.object_controller
     if not 0.0 <= oc.spread <= 1.0:
         raise ValueError("object_controller.spread must be in [0, 1]")
+    if not 0.0 <= oc.recover < oc.survival:
+        raise ValueError(f"object_controller.recover must be in [0, survival = {oc.survival}), got {oc.recover}")
+    if not 0.0 < oc.decay <= 1.0:
+        raise ValueError(f"object_controller.decay must be in (0, 1], got {oc.decay}")
     if oc.start_hold_frames < 0 or (oc.start_hold_frames > 0 and not oc.enabled):
         raise ValueError("object_controller.start_hold_frames must be >= 0 and needs the controller enabled")
     ra = cfg.root_assist

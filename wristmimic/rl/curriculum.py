@@ -3,7 +3,9 @@ assist's and the hands' adhesion gains (:func:`root_assist_gain`, :func:`hand_ad
 
 The gain starts at ``initial_gain``. After every iteration whose episodes would survive a whole clip with
 probability above ``survival`` (projected from the iteration's termination rate per step), it is multiplied by
-``decay``; below ``min_gain`` it becomes 0. A cap ``1 - frames / zero_by_frames`` makes it reach zero after that
+``decay``; with ``recover`` > 0, after every iteration whose projected survival is below ``recover`` it is divided
+by ``decay`` again (up to ``initial_gain``: DexMachina dials its gains back when episodes stay short); below
+``min_gain`` it becomes 0, for good. A cap ``1 - frames / zero_by_frames`` makes it reach zero after that
 many training frames whatever the episodes do, so the policy always trains its last part, and is always
 evaluated, without help.
 """
@@ -58,8 +60,11 @@ class ObjectCurriculum:
         if self.gain == 0.0:
             return 0.0
         c = self.cfg
-        if self.projected_survival(terminations, world_steps) > c.survival:
+        survival = self.projected_survival(terminations, world_steps)
+        if survival > c.survival:
             self._adaptive *= c.decay
+        elif survival < c.recover:
+            self._adaptive = min(self._adaptive / c.decay, c.initial_gain)
         cap = 1.0 - frames / max(c.zero_by_frames, 1)
         gain = min(self._adaptive, cap * c.initial_gain)
         self.gain = 0.0 if gain < c.min_gain or math.isnan(gain) else gain
