@@ -114,6 +114,35 @@ def test_recover_dials_the_gain_back_when_episodes_stay_short_and_zero_stays_zer
             check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(**bad)))
 
 
+def test_completion_gate_counts_episodes_that_reach_the_end_and_training_feeds_it(dataset: Path, tmp_path: Path) -> None:
+    """gate=completion: the statistic is the share of ended episodes that were not terminated (an iteration
+    without an ended episode moves nothing); the runner feeds each iteration's episodes and terminations, so the
+    logged gains are exactly a replay of the curriculum over metrics.csv's columns."""
+    cfg = ObjectControllerConfig(decay=0.5, survival=0.5, recover=0.2, gate="completion", zero_by_frames=10**6)
+    cur = ObjectCurriculum(cfg, num_frames=101)
+    assert cur.update(terminations=0, world_steps=100, frames=0, episodes=0) == 1.0  # nothing ended: no move
+    assert cur.update(terminations=1, world_steps=100, frames=0, episodes=4) == pytest.approx(0.5)  # 3/4 completed
+    assert cur.update(terminations=3, world_steps=100, frames=0, episodes=10) == pytest.approx(0.25)  # 0.7
+    assert cur.update(terminations=6, world_steps=100, frames=0, episodes=10) == pytest.approx(0.25)  # 0.4: holds
+    assert cur.update(terminations=9, world_steps=100, frames=0, episodes=10) == pytest.approx(0.5)  # 0.1: back
+    with pytest.raises(ValueError, match="gate"):
+        check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(gate="length")))
+    oc = ObjectControllerConfig(decay=0.7, survival=0.3, recover=0.1, gate="completion", zero_by_frames=10**6)
+    env_cfg = variant_config("wristmimic", object_controller=oc)
+    ppo = preset("cpu", num_envs=8, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=64 * 12), env=env_cfg)
+    start_run(spec, tmp_path / "run", progress=False)
+    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    replay = ObjectCurriculum(oc, num_frames=40)
+    for row in rows:
+        assert float(row["curriculum/object_gain"]) == pytest.approx(replay.gain, abs=0, rel=1e-12)
+        terms = sum(int(v) for k, v in row.items() if k.startswith("termination/"))
+        replay.update(terms, 64, int(row["frames"]), episodes=int(row["episodes"]))
+    gains = {float(r["curriculum/object_gain"]) for r in rows}
+    assert len(gains) > 1  # the gate moved the gain in this run
+
+
 def test_training_logs_the_gain_records_when_it_reached_zero_and_evaluation_never_applies_it(
     dataset: Path, tmp_path: Path
 ) -> None:

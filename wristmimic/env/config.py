@@ -153,11 +153,18 @@ class ObjectControllerConfig:
     decay: float = 0.8
     """The gain is multiplied by this after every iteration whose episodes pass ``survival``."""
     survival: float = 0.5
-    """Decay when the iteration's projected full-clip survival (1 - terminations / steps)^(T - 1) is above this."""
+    """Decay when the iteration's gate statistic (``gate``; by default the projected full-clip survival
+    (1 - terminations / steps)^(T - 1)) is above this."""
+    gate: str = "hazard"
+    """What ``survival`` and ``recover`` compare against. ``hazard``: the iteration's projected full-clip survival
+    (1 - terminations / steps)^(T - 1). ``completion``: the share of the iteration's ended episodes that reached
+    the end of the clip unterminated (DexMachina's "episodes reach full length"); with failure-weighted start
+    frames most episodes start where the policy fails, so their termination rate per step stays high however much
+    the controller helps, while completion measures whether the help carries the policy from there to the end."""
     recover: float = 0.0
-    """Dial the help back (DexMachina): after every iteration whose projected full-clip survival is below this,
-    the gain is divided by ``decay`` (at most ``initial_gain``, and never above the frame cap), so over a long run
-    the gain settles where the policy just survives and falls to zero only as the policy takes the object over.
+    """Dial the help back (DexMachina): after every iteration whose gate statistic is below this, the gain is
+    divided by ``decay`` (at most ``initial_gain``, and never above the frame cap), so over a long run the gain
+    settles where the policy just completes the clip and falls to zero only as the policy takes the object over.
     Must be below ``survival``; 0: off (the gain only falls). A gain that reached exactly zero stays zero."""
     min_gain: float = 0.05
     """A gain below this becomes exactly zero."""
@@ -525,6 +532,8 @@ def check_env_config(cfg: EnvConfig) -> None:
     oc = cfg.object_controller
     if not 0.0 <= oc.spread <= 1.0:
         raise ValueError("object_controller.spread must be in [0, 1]")
+    if oc.gate not in ("hazard", "completion"):
+        raise ValueError(f"object_controller.gate must be 'hazard' or 'completion', got {oc.gate!r}")
     if not 0.0 <= oc.recover < oc.survival:
         raise ValueError(f"object_controller.recover must be in [0, survival = {oc.survival}), got {oc.recover}")
     if not 0.0 < oc.decay <= 1.0:

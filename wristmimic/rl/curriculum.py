@@ -2,7 +2,8 @@
 assist's and the hands' adhesion gains (:func:`root_assist_gain`, :func:`hand_adhesion_gain`, linear ramps to zero).
 
 The gain starts at ``initial_gain``. After every iteration whose episodes would survive a whole clip with
-probability above ``survival`` (projected from the iteration's termination rate per step), it is multiplied by
+probability above ``survival`` (projected from the iteration's termination rate per step; with ``gate="completion"``
+the share of its ended episodes that reached the clip's end), it is multiplied by
 ``decay``; with ``recover`` > 0, after every iteration whose projected survival is below ``recover`` it is divided
 by ``decay`` again (up to ``initial_gain``: DexMachina dials its gains back when episodes stay short); below
 ``min_gain`` it becomes 0, for good. A cap ``1 - frames / zero_by_frames`` makes it reach zero after that
@@ -54,16 +55,20 @@ class ObjectCurriculum:
         hazard = terminations / max(world_steps, 1)
         return (1.0 - hazard) ** max(self.num_frames - 1, 1)
 
-    def update(self, terminations: int, world_steps: int, frames: int) -> float:
-        """Advance after an iteration (its terminations over ``world_steps`` world steps; ``frames`` trained so
-        far); returns the new gain."""
+    def update(self, terminations: int, world_steps: int, frames: int, episodes: int | None = None) -> float:
+        """Advance after an iteration (its terminations over ``world_steps`` world steps and ``episodes`` ended
+        episodes; ``frames`` trained so far); returns the new gain. With ``gate="completion"`` an iteration in
+        which no episode ended moves nothing but the frame cap."""
         if self.gain == 0.0:
             return 0.0
         c = self.cfg
-        survival = self.projected_survival(terminations, world_steps)
-        if survival > c.survival:
+        if c.gate == "completion":
+            stat = (episodes - terminations) / episodes if episodes else None
+        else:
+            stat = self.projected_survival(terminations, world_steps)
+        if stat is not None and stat > c.survival:
             self._adaptive *= c.decay
-        elif survival < c.recover:
+        elif stat is not None and stat < c.recover:
             self._adaptive = min(self._adaptive / c.decay, c.initial_gain)
         cap = 1.0 - frames / max(c.zero_by_frames, 1)
         gain = min(self._adaptive, cap * c.initial_gain)

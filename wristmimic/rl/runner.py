@@ -175,7 +175,9 @@ class Runner:
                     self.iteration += 1
                     self.frames += self.cfg.batch_size
                     terminations = sum(v for k, v in episode_row.items() if k.startswith("termination/"))
-                    self.env.object_gain = self.curriculum.update(terminations, self.cfg.batch_size, self.frames)
+                    self.env.object_gain = self.curriculum.update(
+                        terminations, self.cfg.batch_size, self.frames, episodes=int(episode_row["episodes"])
+                    )
                     if self._weight_ramp:
                         self.env.object_weight_gain = self.curriculum.weight_gain(self.frames)
                     self.env.root_gain = root_assist_gain(self.env.cfg.root_assist, self.frames)
