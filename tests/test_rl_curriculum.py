@@ -114,7 +114,9 @@ def test_recover_dials_the_gain_back_when_episodes_stay_short_and_zero_stays_zer
             check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(**bad)))
 
 
-def test_completion_gate_counts_episodes_that_reach_the_end_and_training_feeds_it(dataset: Path, tmp_path: Path) -> None:
+def test_completion_gate_counts_episodes_that_reach_the_end_and_training_feeds_it(
+    dataset: Path, tmp_path: Path
+) -> None:
     """gate=completion: the statistic is the share of ended episodes that were not terminated (an iteration
     without an ended episode moves nothing); the runner feeds each iteration's episodes and terminations, so the
     logged gains are exactly a replay of the curriculum over metrics.csv's columns."""
