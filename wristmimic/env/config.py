@@ -158,7 +158,7 @@ class ObjectControllerConfig:
     gate: str = "hazard"
     """What ``survival`` and ``recover`` compare against. ``hazard``: the iteration's projected full-clip survival
     (1 - terminations / steps)^(T - 1). ``completion``: the share of the iteration's ended episodes that reached
-    the end of the clip unterminated (DexMachina's "episodes reach full length"); with failure-weighted start
+    the end of the clip (or ``max_episode_frames``) unterminated (DexMachina's "episodes reach full length"); with failure-weighted start
     frames most episodes start where the policy fails, so their termination rate per step stays high however much
     the controller helps, while completion measures whether the help carries the policy from there to the end."""
     recover: float = 0.0
