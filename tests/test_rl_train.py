@@ -379,6 +379,26 @@ def test_kinematic_grip_probe_moves_wrists_with_the_object_and_holds_the_object(
     assert held.max() < 1e-6  # the object sat on its reference for every frame
 
 
+def test_hold_probe_releases_the_object_to_the_hands_alone(dataset: Path) -> None:
+    """scripts/hold_probe.py: with the hands moved 0.5 m away nothing holds the released object (the floor and the
+    rest of the humanoid do not collide), so it falls freely: g t^2 / 2 over the frames after release; runs are
+    deterministic, the search never reports worse than its nominal, and bad arguments stop with one line."""
+    probe = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "hold_probe.py"))
+    base = [str(dataset), "--scene", SID, "--frame", "20", "--closures", "1.0", "--close", "2", "--hold", "3"]
+    far = probe["probe"](
+        probe["parser"]().parse_args([*base, "--frames", "9", "--offset", "0,0.5,0,0,0,0"]), log=lambda _: None
+    )
+    n, dt = 6 * 4, 1 / 120  # six frames of four substeps after the release; semi-implicit Euler free fall
+    (row,) = far["nominal"]
+    assert row["displacement"] == pytest.approx(9.81 * dt * dt * n * (n + 1) / 2, rel=0.01) and row["held"] < 6
+    args = probe["parser"]().parse_args([*base, "--frames", "9", "--samples", "4", "--iters", "2"])
+    one, two = probe["probe"](args, log=lambda _: None), probe["probe"](args, log=lambda _: None)
+    assert one == two
+    assert one["search"]["best_displacement"] <= one["nominal"][0]["displacement"]
+    with pytest.raises(SystemExit, match="--close"):
+        probe["probe"](probe["parser"]().parse_args([*base, "--frames", "3"]), log=lambda _: None)
+
+
 def test_object_force_probe_drives_the_object_alone_and_reports_the_controllers_force(
     dataset: Path, tmp_path: Path
 ) -> None:
