@@ -1,7 +1,7 @@
 """Static hold probe: can the hands hold the object at all, near the reference's grasp, with nothing else touching it?
 
 Usage:  python scripts/hold_probe.py DATASET.h5 --scene SEQ --frame F [--hands right|left|both]
-        [--closures 0.8,1,1.2,1.5,2] [--offset DX,DY,DZ,RX,RY,RZ] [--samples 0 --iters 0 --translate 0.02 --rotate 0.4]
+        [--closures 0.8,1,1.2,1.5,2] [--synergy S] [--offset DX,DY,DZ,RX,RY,RZ] [--samples 0 --iters 0 --translate 0.02 --rotate 0.4]
         [--close 10 --hold 12 --frames 40] [--set scene_config.FIELD=VALUE | env.FIELD=VALUE ...] [--seed 0] [-o out.json]
 
 The humanoid stands still in the reference pose of frame F, kinematic (every non-finger degree of freedom set before
@@ -10,7 +10,8 @@ vector in rad about the first chosen hand's wrist; world frame). Only the chosen
 the object collide: every other geom (the rest of the humanoid, the floor, supports, other objects) has its
 collisions turned off, so whatever keeps the object up is the hands. The object is held on its frame-F reference
 pose while the chosen hands' fingers close from open (target 0) to k x the reference's finger angles (clipped to
-the joint ranges) over ``--close`` frames; at ``--hold`` frames it is released, and it is watched for ``--frames``
+the joint ranges; with ``--synergy S`` k x S rad along the grasp synergy's closure, :mod:`wristmimic.env.synergy`,
+for hands without a finger reference) over ``--close`` frames; at ``--hold`` frames it is released, and it is watched for ``--frames``
 frames in all. Reported per candidate: the frames it stayed within 5 cm of its held position after release
 (``held``, at most frames - hold) and its displacement at the end (m; a free fall covers g t^2 / 2).
 
@@ -37,6 +38,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from kinematic_grip_probe import HANDS, KinematicReplay, build  # noqa: E402
 
+from wristmimic.env.synergy import closure_coefficients  # noqa: E402
 from wristmimic.rl.config import to_jsonable  # noqa: E402
 from wristmimic.rotations import quat_mul  # noqa: E402
 from wristmimic.safe_io import atomic_output  # noqa: E402
@@ -79,6 +81,10 @@ class HoldProbe:
         wrist = int(np.atleast_1d(roles[f"{HANDS[args.hands][0]}_hand"])[0])
         self.pivot = d.xpos[int(env.scene.body_ids[wrist])].copy()
         self.obj_pose = self.base[rp.obj_pose_q].copy()
+        sides = [("left", "right").index(h) for h in HANDS[args.hands]]
+        closure = closure_coefficients(env.scene)[sides].sum(axis=0)
+        self.closed = args.synergy * closure if args.synergy > 0 else rp.qpos[args.frame][rp.hinge_q]
+        """Finger targets at closure 1 (action order): the reference's angles, or the synergy's."""
 
     def run(self, x: np.ndarray) -> tuple[int, float]:
         """(frames held after release, final displacement in m) for x = (dx, dy, dz, rx, ry, rz, closure)."""
@@ -94,7 +100,7 @@ class HoldProbe:
         d.qpos[rp.obj_pose_q] = self.obj_pose
         hinges = q[rp.hinge_q]
         start = np.where(self.fingers, 0.0, hinges)
-        target = np.where(self.fingers, np.clip(rp.qpos[self.frame][rp.hinge_q] * x[6], rp.lo, rp.hi), hinges)
+        target = np.where(self.fingers, np.clip(self.closed * x[6], rp.lo, rp.hi), hinges)
         held, dropped = 0, False
         for t in range(self.frames):
             a = min(t / max(self.close, 1), 1.0)
@@ -171,6 +177,7 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--closures", type=_floats, default=[0.8, 1.0, 1.2, 1.5, 2.0], help="k x the reference's finger angles"
     )
+    ap.add_argument("--synergy", type=float, default=0.0, help="> 0: close along the grasp synergy (rad per unit)")
     ap.add_argument("--offset", type=_floats, default=[0.0] * 6, help="DX,DY,DZ (m),RX,RY,RZ (rad) of the humanoid")
     ap.add_argument("--samples", type=int, default=0, help="> 0: cross-entropy search over offset and closure")
     ap.add_argument("--iters", type=int, default=6)

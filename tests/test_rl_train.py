@@ -395,6 +395,9 @@ def test_hold_probe_releases_the_object_to_the_hands_alone(dataset: Path) -> Non
     one, two = probe["probe"](args, log=lambda _: None), probe["probe"](args, log=lambda _: None)
     assert one == two
     assert one["search"]["best_displacement"] <= one["nominal"][0]["displacement"]
+    syn = probe["HoldProbe"](probe["parser"]().parse_args([*base, "--hands", "right", "--synergy", "1.5"]))
+    closed, fingers = syn.closed, syn.fingers  # the synergy's closure: right finger hinges only, at most 1.5 rad
+    assert np.abs(closed[~fingers]).max() == 0.0 and 1.0 < np.abs(closed[fingers]).max() <= 1.5 + 1e-9
     with pytest.raises(SystemExit, match="--close"):
         probe["probe"](probe["parser"]().parse_args([*base, "--frames", "3"]), log=lambda _: None)
 
