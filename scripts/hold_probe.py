@@ -1,14 +1,16 @@
 """Static hold probe: can the hands hold the object at all, near the reference's grasp, with nothing else touching it?
 
 Usage:  python scripts/hold_probe.py DATASET.h5 --scene SEQ --frame F [--hands right|left|both]
-        [--closures 0.8,1,1.2,1.5,2] [--synergy S] [--offset DX,DY,DZ,RX,RY,RZ] [--samples 0 --iters 0 --translate 0.02 --rotate 0.4]
+        [--closures 0.8,1,1.2,1.5,2] [--synergy S] [--floor] [--offset DX,DY,DZ,RX,RY,RZ] [--samples 0 --iters 0 --translate 0.02 --rotate 0.4]
         [--close 10 --hold 12 --frames 40] [--set scene_config.FIELD=VALUE | env.FIELD=VALUE ...] [--seed 0] [-o out.json]
 
 The humanoid stands still in the reference pose of frame F, kinematic (every non-finger degree of freedom set before
 each physics substep, as in ``kinematic_grip_probe.py``), optionally moved rigidly by a 6-D offset (m, and a rotation
 vector in rad about the first chosen hand's wrist; world frame). Only the chosen hands (wrist and finger bodies) and
 the object collide: every other geom (the rest of the humanoid, the floor, supports, other objects) has its
-collisions turned off, so whatever keeps the object up is the hands. The object is held on its frame-F reference
+collisions turned off, so whatever keeps the object up is the hands (``--floor`` keeps the floor and static
+objects: an object the reference tilts up off the floor, such as ``sub2_largetable_000``'s table, must then be held
+up by the hands at its raised end). The object is held on its frame-F reference
 pose while the chosen hands' fingers close from open (target 0) to k x the reference's finger angles (clipped to
 the joint ranges; with ``--synergy S`` k x S rad along the grasp synergy's closure, :mod:`wristmimic.env.synergy`,
 for hands without a finger reference) over ``--close`` frames; at ``--hold`` frames it is released, and it is watched for ``--frames``
@@ -72,6 +74,8 @@ class HoldProbe:
         keep = np.zeros(m.nbody, dtype=bool)
         keep[[int(env.scene.body_ids[b]) for b in hand_bodies]] = True
         keep |= np.isin(np.arange(m.nbody), np.unique(m.geom_bodyid[rp.object_geom]))
+        if args.floor:  # the floor and static objects too: only the rest of the humanoid is turned off
+            keep |= ~np.isin(np.arange(m.nbody), np.asarray(env.scene.body_ids))
         off = ~keep[m.geom_bodyid]
         m.geom_contype[off], m.geom_conaffinity[off] = 0, 0
         self.frame, self.close, self.hold, self.frames = args.frame, args.close, args.hold, args.frames
@@ -183,6 +187,9 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--iters", type=int, default=6)
     ap.add_argument("--translate", type=float, default=0.02, help="initial search sigma of the translation (m)")
     ap.add_argument("--rotate", type=float, default=0.4, help="initial search sigma of the rotation (rad)")
+    ap.add_argument(
+        "--floor", action="store_true", help="keep the floor and static objects (an object resting on them, lifted)"
+    )
     ap.add_argument("--close", type=int, default=10, help="frames over which the fingers close")
     ap.add_argument("--hold", type=int, default=12, help="frames the object is held before its release")
     ap.add_argument("--frames", type=int, default=40, help="frames simulated in all")

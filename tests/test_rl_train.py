@@ -391,6 +391,10 @@ def test_hold_probe_releases_the_object_to_the_hands_alone(dataset: Path) -> Non
     n, dt = 6 * 4, 1 / 120  # six frames of four substeps after the release; semi-implicit Euler free fall
     (row,) = far["nominal"]
     assert row["displacement"] == pytest.approx(9.81 * dt * dt * n * (n + 1) / 2, rel=0.01) and row["held"] < 6
+    long = [*base, "--frames", "40", "--offset", "0,0.5,0,0,0,0"]  # 37 frames after the release: a 7.5 m free fall
+    fall = probe["probe"](probe["parser"]().parse_args(long), log=lambda _: None)["nominal"][0]["displacement"]
+    floor = probe["probe"](probe["parser"]().parse_args([*long, "--floor"]), log=lambda _: None)["nominal"][0]
+    assert fall > 7.0 and floor["displacement"] < 2.0  # --floor: the floor catches it
     args = probe["parser"]().parse_args([*base, "--frames", "9", "--samples", "4", "--iters", "2"])
     one, two = probe["probe"](args, log=lambda _: None), probe["probe"](args, log=lambda _: None)
     assert one == two
