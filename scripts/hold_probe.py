@@ -104,6 +104,7 @@ class HoldProbe:
         d.qpos[rp.obj_pose_q] = self.obj_pose
         hinges = q[rp.hinge_q]
         start = np.where(self.fingers, 0.0, hinges)
+        d.qpos[rp.hinge_q[self.fingers]] = 0.0  # the chosen hands' fingers start open
         target = np.where(self.fingers, np.clip(self.closed * x[6], rp.lo, rp.hi), hinges)
         held, dropped = 0, False
         for t in range(self.frames):
