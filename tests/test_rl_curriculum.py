@@ -40,6 +40,18 @@ def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return converted_intermimic(tmp, 40)
 
 
+def _train_rows(dataset: Path, run: Path, oc: ObjectControllerConfig, num_envs: int, max_frames: int) -> list[dict]:
+    """metrics.csv rows of a tiny CPU-recipe run with object controller ``oc``."""
+    env_cfg = variant_config("wristmimic", object_controller=oc)
+    ppo = preset(
+        "cpu", num_envs=num_envs, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,)
+    )
+    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=max_frames), env=env_cfg)
+    start_run(spec, run, progress=False)
+    with open(run / "metrics.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
 def _object_error_after(dataset: Path, gain: float, steps: int = 25) -> float:
     """Mean object position error after ``steps`` steps from frame 0 with zero actions (humanoid tracking)."""
     cfg = variant_config("wristmimic", wrist_resets=False)
@@ -130,12 +142,7 @@ def test_completion_gate_counts_episodes_that_reach_the_end_and_training_feeds_i
     with pytest.raises(ValueError, match="gate"):
         check_env_config(variant_config("wristmimic", object_controller=ObjectControllerConfig(gate="length")))
     oc = ObjectControllerConfig(decay=0.7, survival=0.3, recover=0.1, gate="completion", zero_by_frames=10**6)
-    env_cfg = variant_config("wristmimic", object_controller=oc)
-    ppo = preset("cpu", num_envs=8, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
-    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=64 * 12), env=env_cfg)
-    start_run(spec, tmp_path / "run", progress=False)
-    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
+    rows = _train_rows(dataset, tmp_path / "run", oc, 8, 64 * 12)
     replay = ObjectCurriculum(oc, num_frames=40)
     for row in rows:
         assert float(row["curriculum/object_gain"]) == pytest.approx(replay.gain, abs=0, rel=1e-12)
@@ -149,12 +156,7 @@ def test_training_logs_the_gain_records_when_it_reached_zero_and_evaluation_neve
     dataset: Path, tmp_path: Path
 ) -> None:
     oc = ObjectControllerConfig(zero_by_frames=32 * 3)
-    env_cfg = variant_config("wristmimic", object_controller=oc)
-    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
-    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 6), env=env_cfg)
-    start_run(spec, tmp_path / "run", progress=False)
-    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
-        gains = [float(r["curriculum/object_gain"]) for r in csv.DictReader(f)]
+    gains = [float(r["curriculum/object_gain"]) for r in _train_rows(dataset, tmp_path / "run", oc, 4, 32 * 6)]
     assert gains[0] == 1.0 and gains[-1] == 0.0 and gains == sorted(gains, reverse=True)
     meta = load_checkpoint(tmp_path / "run")["metadata"]
     assert meta["object_gain"] == 0.0 and 0 < meta["object_gain_zero_frames"] <= 32 * 3
@@ -192,12 +194,7 @@ def test_weight_support_alone_is_exactly_the_objects_weight(dataset: Path) -> No
 
 def test_training_logs_the_weight_ramp_and_evaluation_never_applies_it(dataset: Path, tmp_path: Path) -> None:
     oc = ObjectControllerConfig(zero_by_frames=32, weight_zero_by_frames=32 * 5)
-    env_cfg = variant_config("wristmimic", object_controller=oc)
-    ppo = preset("cpu", num_envs=4, horizon=8, minibatch_size=16, epochs=1, actor_hidden=(16,), critic_hidden=(16,))
-    spec = TrainSpec(dataset, SID, "wristmimic", 0, "cpu", replace(ppo, max_frames=32 * 4), env=env_cfg)
-    start_run(spec, tmp_path / "run", progress=False)
-    with open(tmp_path / "run" / "metrics.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
+    rows = _train_rows(dataset, tmp_path / "run", oc, 4, 32 * 4)
     pose = [float(r["curriculum/object_gain"]) for r in rows]
     weight = [float(r["curriculum/object_weight_gain"]) for r in rows]
     assert pose == [1.0, 0.0, 0.0, 0.0] and weight == pytest.approx([1.0, 0.8, 0.6, 0.4])
