@@ -20,6 +20,8 @@ import wristmimic
 from wristmimic.cli.main import app
 from wristmimic.convert.common import ConvertOptions
 from wristmimic.convert.intermimic import convert_intermimic
+from wristmimic.env.config import variant_config
+from wristmimic.env.terminations import REASONS
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.errors import InputError
 from wristmimic.rl import TrainSpec, load_policy, preset, resume_run, start_run
@@ -404,6 +406,24 @@ def test_hold_probe_releases_the_object_to_the_hands_alone(dataset: Path) -> Non
     assert np.abs(closed[~fingers]).max() == 0.0 and 1.0 < np.abs(closed[fingers]).max() <= 1.5 + 1e-9
     with pytest.raises(SystemExit, match="--close"):
         probe["probe"](probe["parser"]().parse_args([*base, "--frames", "3"]), log=lambda _: None)
+
+
+def test_assisted_rollout_gives_each_world_its_own_share_of_the_controller(dataset: Path, tmp_path: Path) -> None:
+    """scripts/assisted_rollout.py: one deterministic frame-0 rollout per gain in the run's training scene; each world's
+    wrench is the full-gain wrench times its own gain (0: none), and every rollout ends with a frame and a reason."""
+    start_run(_spec(dataset, 1), tmp_path / "run", nthread=1, progress=False)
+    script = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "assisted_rollout.py"))
+    gains = [1.0, 0.5, 0.0]
+    one = script["rollouts"](tmp_path / "run", gains)
+    assert one == script["rollouts"](tmp_path / "run", gains)  # deterministic
+    assert [r["gain"] for r in one] == gains
+    assert all(1 <= r["frames"] <= 40 and r["reason"] in ("end", *REASONS.values()) for r in one)
+    cfg = variant_config("wristmimic")
+    env = WristMimicEnv.from_file(dataset, SID, 3, cfg, SceneConfig(object_actuators=True), seed=0)
+    env.reset(start_frames=torch.full((3,), 10, dtype=torch.long))
+    env.object_gain, env.object_scale = 1.0, torch.tensor(gains)  # how the script applies each world's gain
+    w = env.object_wrench()
+    assert torch.allclose(w[1], 0.5 * w[0], atol=1e-5) and torch.all(w[2] == 0) and w[0].abs().max() > 0
 
 
 def test_object_force_probe_drives_the_object_alone_and_reports_the_controllers_force(
