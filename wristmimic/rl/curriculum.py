@@ -4,7 +4,7 @@ assist's and the hands' adhesion gains (:func:`root_assist_gain`, :func:`hand_ad
 The gain starts at ``initial_gain``. After every iteration whose episodes would survive a whole clip with
 probability above ``survival`` (projected from the iteration's termination rate per step; with ``gate="completion"``
 the share of its ended episodes that reached the clip's end), it is multiplied by
-``decay``; with ``recover`` > 0, after every iteration whose projected survival is below ``recover`` it is divided
+``decay``; with ``recover`` > 0, after every iteration whose statistic is below ``recover`` it is divided
 by ``decay`` again (up to ``initial_gain``: DexMachina dials its gains back when episodes stay short); below
 ``min_gain`` it becomes 0, for good. A cap ``1 - frames / zero_by_frames`` makes it reach zero after that
 many training frames whatever the episodes do, so the policy always trains its last part, and is always
