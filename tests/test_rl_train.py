@@ -426,6 +426,46 @@ def test_assisted_rollout_gives_each_world_its_own_share_of_the_controller(datas
     assert torch.allclose(w[1], 0.5 * w[0], atol=1e-5) and torch.all(w[2] == 0) and w[0].abs().max() > 0
 
 
+def test_assisted_rollout_loads_account_for_every_force_on_the_object(dataset: Path, tmp_path: Path) -> None:
+    """scripts/assisted_rollout.py --loads: the sources' forces plus gravity equal the object's mass times its
+    acceleration, with and without the controller (no force missed, counted twice or of the wrong sign); the
+    controller's row is zero without help; the summary averages the reference's contact frames by source."""
+    script = runpy.run_path(str(Path(__file__).parents[1] / "scripts" / "assisted_rollout.py"))
+    sources = script["SOURCES"]
+    env = WristMimicEnv.from_file(dataset, SID, 2, variant_config("wristmimic"), SceneConfig(object_actuators=True))
+    meter = script["LoadMeter"](env)
+    m, obj = env.scene.model, env.scene.dynamic_objects[0]
+    mass = float(m.body_subtreemass[obj.body_id])
+    assert meter.weight == pytest.approx(mass * 9.81, rel=1e-3)
+    env.reset(start_frames=torch.zeros(2, dtype=torch.long))
+    env.object_gain, env.object_scale = 1.0, torch.tensor([0.0, 1.0])
+    for _ in range(3):
+        env.step(torch.zeros(2, env.action_size))
+    for world in (0, 1):
+        f = meter(world)
+        acc = meter.data.qacc[obj.dofadr : obj.dofadr + 3]  # the free joint's linear acceleration (world frame)
+        np.testing.assert_allclose(f.sum(0) + mass * m.opt.gravity, mass * acc, atol=0.02 * meter.weight)
+        assert np.all(f[sources.index("controller")] == 0) == (world == 0)
+    # without help the fixture's box, which starts in the hands, is held up by them
+    assert meter(0)[sources.index("hands"), 2] > 0.3 * meter.weight
+    env.close()
+    # the summary: vertical shares over contact frames, drive along the reference's horizontal motion
+    ref = env.ref
+    frames = np.arange(1, ref.num_frames)
+    forces = np.zeros((len(frames), len(sources), 3))
+    forces[:, sources.index("hands")] = [0.0, 0.0, meter.weight]
+    vel = ref.obj_linvel[frames, 0, :2].numpy()
+    moving = ref.hand[frames].any(-1).numpy() & (np.linalg.norm(vel, axis=-1) > 0.05)
+    assert moving.any()
+    forces[:, sources.index("supports"), :2] = -3.0 * vel / np.linalg.norm(vel, axis=-1, keepdims=True).clip(1e-9)
+    out = script["summarize_loads"](forces, frames, ref, meter.weight)
+    assert out["lift"]["hands"] == pytest.approx(1.0) and out["lift"]["controller"] == 0.0
+    assert out["drive"]["supports"] == pytest.approx(-3.0) and out["drive"]["hands"] == 0.0
+    start_run(_spec(dataset, 1), tmp_path / "run", nthread=1, progress=False)
+    res = script["rollouts"](tmp_path / "run", [1.0, 0.0], loads=True)
+    assert all(set(r["lift"]) == set(sources) and set(r["drive"]) == set(sources) for r in res)
+
+
 def test_object_force_probe_drives_the_object_alone_and_reports_the_controllers_force(
     dataset: Path, tmp_path: Path
 ) -> None:
