@@ -448,6 +448,12 @@ def test_assisted_rollout_loads_account_for_every_force_on_the_object(dataset: P
         assert np.all(f[sources.index("controller")] == 0) == (world == 0)
     # without help the fixture's box, which starts in the hands, is held up by them
     assert meter(0)[sources.index("hands"), 2] > 0.3 * meter.weight
+    # the contact sensors' net force of a hand body is the force it exerts on the object (the drive factor's sign)
+    st, hands = env.sim_state(), torch.cat(env.hands)
+    touch = st.contact_obj[0, hands]
+    assert touch.any()
+    on_object = (st.contact_force[0, hands] * touch[:, None]).sum(0).numpy()
+    np.testing.assert_allclose(on_object, meter(0)[sources.index("hands")], rtol=1e-4, atol=1e-3)
     env.close()
     # the summary: vertical shares over contact frames, drive along the reference's horizontal motion
     ref = env.ref

@@ -89,6 +89,14 @@ class RewardWeights:
     the hand's fingertips to the nearest object surface point (the ``ig_points`` sample). It asks the fingers to
     close on the object without any finger reference (the binary contact-hand factor is satisfied by one
     touching segment); 0 turns the factor off."""
+    drive: float = 0.0
+    """Hands that carry, not lean (1 per share of the object's weight): exp(-drive * E), E = the hands' contact
+    force on the object against the reference object's direction of motion (the tracked frame's velocity, where
+    it moves faster than 5 cm/s), over the object's weight; pushing along the motion or sideways costs nothing.
+    With the object controller carrying the object, every sub2 policy leant on the table and pushed it against its
+    motion (``scripts/assisted_rollout.py --loads``: -28 to -97 N at every gain) while the controller dragged it;
+    the object factors cannot see this while the controller keeps the object on its reference. One dynamic object
+    only; 0 turns the factor off."""
 
 
 @dataclass(frozen=True)
@@ -518,6 +526,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"finger_grip_from must be a frame >= 0, got {cfg.finger_grip_from!r}")
     if cfg.finger_grip and cfg.finger_action == "delta":
         raise ValueError("finger_grip works with absolute or range finger actions, not finger_action=delta")
+    if not 0.0 <= cfg.weights.drive < math.inf:
+        raise ValueError(f"weights.drive must be a finite weight >= 0, got {cfg.weights.drive}")
     if not 0.0 <= cfg.foot_clearance <= 0.1:
         raise ValueError(f"foot_clearance must be in [0, 0.1] m, got {cfg.foot_clearance}")
     st = cfg.starts

@@ -7,8 +7,8 @@ Every ``error_*`` function returns the raw error E of one factor, shape (N,); th
 
 Factors (names): body_pos, body_rot, [root_pos, root_rot, feet_pos, root_vel, body_vel,
 feet_contact] (weights > 0), [wrist_pos, wrist_rot] (cfg.wrist_terms), [finger_pos, finger_rot]
-(cfg.finger_targets), obj_pos, obj_rot, ig, contact_hand, contact_other, joint_energy, obj_energy_lin,
-obj_energy_ang, contact_energy.
+(cfg.finger_targets), obj_pos, obj_rot, ig, contact_hand, contact_other, [fingertip, drive] (weights > 0),
+joint_energy, obj_energy_lin, obj_energy_ang, contact_energy.
 Shapes: N worlds, B bodies, O dynamic objects, K key bodies, P object surface points, D hinge joints.
 """
 
@@ -84,6 +84,10 @@ class RewardInputs:
     ref_ig_weights: torch.Tensor | None = None
     """(N, K, P) the reference's normalised interaction-graph weights :func:`ig_weights` if precomputed per
     frame; None: computed here from ref_ig_pos and ref_points."""
+    ref_obj_linvel: torch.Tensor | None = None
+    """(N, O, 3) the reference objects' linear velocities at the tracked frame; needed only by drive."""
+    obj_weight: torch.Tensor | None = None
+    """(O,) the dynamic objects' weights m g (N); needed only by drive."""
 
 
 # --- helpers -------------------------------------------------------------------------------------------------
@@ -262,6 +266,30 @@ def error_fingertip(x: RewardInputs) -> torch.Tensor:
     return (d * x.ref_hand.to(d.dtype)).sum(-1)
 
 
+DRIVE_MIN_SPEED = 0.05
+"""m/s: the drive factor looks only at frames where the reference object moves faster than this."""
+
+
+def error_drive(x: RewardInputs, sets: BodySets) -> torch.Tensor:
+    """E = max(0, -F . v / |v|) / (m g): the hands' net contact force on the (one) dynamic object against the
+    reference object's velocity v at the tracked frame (0 where |v| <= DRIVE_MIN_SPEED), over its weight. The
+    contact sensors' net force of a body is the force it exerts on what it touches (world frame); only hand
+    bodies touching the object count."""
+    if x.ref_obj_linvel is None or x.obj_weight is None:
+        raise ValueError("weights.drive > 0 needs the reference object velocity and the object's weight")
+    if x.ref_obj_linvel.shape[1] != 1:
+        raise ValueError(
+            f"weights.drive > 0 needs exactly one dynamic object, the scene has {x.ref_obj_linvel.shape[1]}"
+        )
+    hands = torch.cat([sets.left_hand, sets.right_hand])
+    touch = x.contact_obj.index_select(1, hands).to(x.contact_force.dtype)
+    force = (x.contact_force.index_select(1, hands) * touch[..., None]).sum(1)  # (N, 3) on the object
+    v = x.ref_obj_linvel[:, 0]
+    speed = torch.linalg.vector_norm(v, dim=-1)
+    along = (force * v).sum(-1) / speed.clamp_min(DRIVE_MIN_SPEED)
+    return torch.where(speed > DRIVE_MIN_SPEED, (-along).clamp_min(0.0) / x.obj_weight[0], 0.0)
+
+
 def error_joint_energy(x: RewardInputs) -> torch.Tensor:
     """E_eg1 = mean over hinges of ((qd - qd_prev) / dt)^2 (joint acceleration)."""
     return _mean(((x.joint_vel - x.prev_joint_vel) / x.dt).square(), (1,))
@@ -314,6 +342,7 @@ def factor_names(cfg: EnvConfig) -> tuple[str, ...]:
         names += ["finger_pos", "finger_rot"]
     names += ["obj_pos", "obj_rot", "ig", "contact_hand", "contact_other"]
     names += ["fingertip"] if cfg.weights.fingertip > 0 else []
+    names += ["drive"] if cfg.weights.drive > 0 else []
     names += ["joint_energy", "obj_energy_lin", "obj_energy_ang", "contact_energy"]
     return tuple(names)
 
@@ -365,6 +394,8 @@ def compute_reward(
     errors["contact_other"], lams["contact_other"] = error_contact_other(x, sets), w.cg_other
     if w.fingertip > 0:
         errors["fingertip"], lams["fingertip"] = error_fingertip(x), w.fingertip
+    if w.drive > 0:
+        errors["drive"], lams["drive"] = error_drive(x, sets), w.drive
     active = x.step >= consts.energy_start_step
     for name, fn, lam in (
         ("joint_energy", error_joint_energy, w.eg1),

@@ -253,6 +253,7 @@ class WristMimicEnv:
         self._voc_cols = idx(voc if self.has_object_controller else np.zeros((0, 6), int))
         bids = [o.body_id for o in scene.dynamic_objects]
         self._obj_mass = f32(m.body_mass[bids])[:, None] if bids else torch.zeros(0, 1, device=dev)
+        self._obj_weight = self._obj_mass[:, 0] * float(np.linalg.norm(m.opt.gravity))
         self._obj_inertia = f32(m.body_inertia[bids].mean(-1))[:, None] if bids else torch.zeros(0, 1, device=dev)
         self._gravity = f32(-m.opt.gravity)
         # root assist (training only): motors on the humanoid root's free joint, if the scene has them
@@ -390,6 +391,11 @@ class WristMimicEnv:
                 for a in range(0, T, 256)
             ]
             self._ref_ig_w = torch.cat(rows_t)
+        if self.cfg.weights.drive > 0 and len(self.scene.dynamic_objects) != 1:
+            raise ValueError(
+                f"weights.drive > 0 needs exactly one dynamic object; scene {self.scene.sequence_id} has"
+                f" {len(self.scene.dynamic_objects)}"
+            )
         # the reference's foot-floor contact schedule, for the feet_contact factor
         self._ref_feet_contact: torch.Tensor | None = None
         if self.cfg.weights.feet_contact > 0:
@@ -899,6 +905,8 @@ class WristMimicEnv:
             ref_feet_contact=None if self._ref_feet_contact is None else self._ref_feet_contact.index_select(0, f),
             ref_body_linvel=None if self._ref_vel is None else self._ref_vel.index_select(0, f),
             tip_sq_dists=self._tip_sq_dists(s, sq) if self.cfg.weights.fingertip > 0 else None,
+            ref_obj_linvel=self.ref.obj_linvel.index_select(0, f) if self.cfg.weights.drive > 0 else None,
+            obj_weight=self._obj_weight,
         )
         return compute_reward(x, self.sets, self.cfg)
 
