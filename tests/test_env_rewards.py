@@ -277,18 +277,18 @@ def test_fingertip_factor_is_the_mean_tip_distance_of_the_hands_in_reference_con
         compute_reward(toy_inputs(), SETS, variant_config("wristmimic", weights=w))
 
 
-def test_drive_factor_is_the_hands_push_against_the_reference_motion_over_the_weight() -> None:
-    """Only hand bodies touching the object count; only the component against the reference object's velocity
-    costs; a reference object slower than 5 cm/s costs nothing."""
+def test_drive_factor_is_the_humanoids_push_against_the_reference_motion_over_the_weight() -> None:
+    """Every body touching the object counts, bodies not touching it do not; only the component against the
+    reference object's velocity costs; a reference object slower than 5 cm/s costs nothing."""
     contact = torch.zeros(N, B, dtype=torch.bool)
-    contact[:, [4, 8, 9, 1]] = True  # left wrist, both fingers, and the spine (not a hand body)
+    contact[:, [4, 8, 9, 3]] = True  # left wrist, both fingers, the left elbow
     contact[1, 8] = False
     force = torch.zeros(N, B, 3)
     force[:, 4] = torch.tensor([-30.0, 5.0, 0.0])  # left wrist: 30 N against +x, 5 N sideways
     force[:, 8] = torch.tensor([-10.0, 0.0, 0.0])  # left finger (not touching in world 1)
     force[:, 9] = torch.tensor([15.0, 0.0, 0.0])  # right finger along the motion: offsets the push
+    force[:, 3] = torch.tensor([-20.0, 0.0, 0.0])  # the elbow pushes too
     force[:, 7] = torch.tensor([-100.0, 0.0, 0.0])  # right wrist, not touching: ignored
-    force[:, 1] = torch.tensor([-500.0, 0.0, 0.0])  # spine touching: not a hand
     vel = torch.tensor([[[0.2, 0.0, 0.0]], [[0.2, 0.0, 0.0]], [[0.04, 0.0, 0.0]]])
     x = replace(
         toy_inputs(), contact_obj=contact, contact_force=force, ref_obj_linvel=vel, obj_weight=torch.tensor([50.0])
@@ -296,7 +296,7 @@ def test_drive_factor_is_the_hands_push_against_the_reference_motion_over_the_we
     w = RewardWeights(drive=2.0)
     reward, info = compute_reward(x, SETS, variant_config("wristmimic", weights=w))
     base, _ = compute_reward(x, SETS, variant_config("wristmimic", weights=PAPER_WEIGHTS))
-    _close(info["error/drive"], [25.0 / 50.0, 15.0 / 50.0, 0.0])  # world 0: -30 - 10 + 15; world 1: -30 + 15
+    _close(info["error/drive"], [45.0 / 50.0, 35.0 / 50.0, 0.0])  # world 0: -30 - 10 + 15 - 20; world 1: -30 + 15 - 20
     torch.testing.assert_close(info["reward/drive"], torch.exp(-2.0 * info["error/drive"]))
     torch.testing.assert_close(reward, base * info["reward/drive"])
     pull = replace(x, contact_force=-force)  # the same forces reversed: along the motion, free

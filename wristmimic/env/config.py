@@ -90,12 +90,12 @@ class RewardWeights:
     close on the object without any finger reference (the binary contact-hand factor is satisfied by one
     touching segment); 0 turns the factor off."""
     drive: float = 0.0
-    """Hands that carry, not lean (1 per share of the object's weight): exp(-drive * E), E = the hands' contact
-    force on the object against the reference object's direction of motion (the tracked frame's velocity, where
-    it moves faster than 5 cm/s), over the object's weight; pushing along the motion or sideways costs nothing.
+    """Carry, do not lean (1 per share of the object's weight): exp(-drive * E), E = the humanoid's contact force
+    on the object against the reference object's direction of motion (the tracked frame's velocity, where it
+    moves faster than 5 cm/s), over the object's weight; pushing along the motion or sideways costs nothing.
     With the object controller carrying the object, every sub2 policy leant on the table and pushed it against its
-    motion (``scripts/assisted_rollout.py --loads``: -28 to -97 N at every gain) while the controller dragged it;
-    the object factors cannot see this while the controller keeps the object on its reference. One dynamic object
+    motion (``scripts/assisted_rollout.py --loads``: 28-97 N at every gain) while the controller dragged it; the
+    object factors cannot see this while the controller keeps the object on its reference. One dynamic object
     only; 0 turns the factor off."""
 
 

@@ -270,20 +270,19 @@ DRIVE_MIN_SPEED = 0.05
 """m/s: the drive factor looks only at frames where the reference object moves faster than this."""
 
 
-def error_drive(x: RewardInputs, sets: BodySets) -> torch.Tensor:
-    """E = max(0, -F . v / |v|) / (m g): the hands' net contact force on the (one) dynamic object against the
+def error_drive(x: RewardInputs) -> torch.Tensor:
+    """E = max(0, -F . v / |v|) / (m g): the humanoid's net contact force F on the (one) dynamic object against the
     reference object's velocity v at the tracked frame (0 where |v| <= DRIVE_MIN_SPEED), over its weight. The
-    contact sensors' net force of a body is the force it exerts on what it touches (world frame); only hand
-    bodies touching the object count."""
+    contact sensors' net force of a body is the force it exerts on what it touches (world frame); every body
+    touching the object counts (with only the hands counted, a policy moved its push to the forearms)."""
     if x.ref_obj_linvel is None or x.obj_weight is None:
         raise ValueError("weights.drive > 0 needs the reference object velocity and the object's weight")
     if x.ref_obj_linvel.shape[1] != 1:
         raise ValueError(
             f"weights.drive > 0 needs exactly one dynamic object, the scene has {x.ref_obj_linvel.shape[1]}"
         )
-    hands = torch.cat([sets.left_hand, sets.right_hand])
-    touch = x.contact_obj.index_select(1, hands).to(x.contact_force.dtype)
-    force = (x.contact_force.index_select(1, hands) * touch[..., None]).sum(1)  # (N, 3) on the object
+    touch = x.contact_obj.to(x.contact_force.dtype)
+    force = (x.contact_force * touch[..., None]).sum(1)  # (N, 3) on the object
     v = x.ref_obj_linvel[:, 0]
     speed = torch.linalg.vector_norm(v, dim=-1)
     along = (force * v).sum(-1) / speed.clamp_min(DRIVE_MIN_SPEED)
@@ -395,7 +394,7 @@ def compute_reward(
     if w.fingertip > 0:
         errors["fingertip"], lams["fingertip"] = error_fingertip(x), w.fingertip
     if w.drive > 0:
-        errors["drive"], lams["drive"] = error_drive(x, sets), w.drive
+        errors["drive"], lams["drive"] = error_drive(x), w.drive
     active = x.step >= consts.energy_start_step
     for name, fn, lam in (
         ("joint_energy", error_joint_energy, w.eg1),
