@@ -94,7 +94,7 @@ class RewardWeights:
     on the object against the reference object's direction of motion (the tracked frame's velocity, where it
     moves faster than 5 cm/s), over the object's weight; pushing along the motion or sideways costs nothing.
     With the object controller carrying the object, every sub2 policy leant on the table and pushed it against its
-    motion (``scripts/assisted_rollout.py --loads``: 28-97 N at every gain) while the controller dragged it; the
+    motion (``scripts/assisted_rollout.py --loads``: 21-97 N at every gain) while the controller dragged it; the
     object factors cannot see this while the controller keeps the object on its reference. One dynamic object
     only; 0 turns the factor off."""
 
