@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from wristmimic.env.config import env_config_from_dict
+from wristmimic.env.rewards import DRIVE_MIN_SPEED
 from wristmimic.env.terminations import REASONS
 from wristmimic.env.vec_env import WristMimicEnv
 from wristmimic.evaluate.policy import load_eval_policy
@@ -89,7 +90,7 @@ def summarize_loads(forces: np.ndarray, frames: np.ndarray, ref: Any, weight: fl
     touch = ref.hand[frames].any(-1).cpu().numpy()
     vel = ref.obj_linvel[frames, 0, :2].cpu().numpy()
     speed = np.linalg.norm(vel, axis=-1)
-    moving = touch & (speed > 0.05)
+    moving = touch & (speed > DRIVE_MIN_SPEED)  # the frames the drive factor looks at
     lift = forces[touch, :, 2].mean(0) / weight if touch.any() else np.full(len(SOURCES), np.nan)
     along = np.einsum("fsk,fk->fs", forces[moving, :, :2], vel[moving] / speed[moving, None])
     drive = along.mean(0) if moving.any() else np.full(len(SOURCES), np.nan)
