@@ -396,3 +396,24 @@ def test_hand_adhesion_acts_through_contact_on_the_object(dataset: Path) -> None
         mujoco.mj_forward(m, d)
         assert np.abs(d.qfrc_actuator[dof]).sum() == 0.0  # only the adhesion acts on the box
     assert any(touching and pull > 1.0 for touching, pull in pulls), pulls
+
+
+def test_horizontal_share_scales_only_the_controllers_sideways_force(dataset: Path) -> None:
+    """``horizontal=0`` keeps the vertical force, the weight and the torque of the full controller and drops its
+    world x, y force; 0.5 halves it."""
+    variant = variant_config("wristmimic")
+
+    def wrench(horizontal: float) -> torch.Tensor:
+        cfg = replace(variant, object_controller=replace(variant.object_controller, horizontal=horizontal))
+        env = WristMimicEnv.from_file(dataset, SID, 1, cfg, SceneConfig(object_actuators=True))
+        env.reset(start_frames=torch.full((1,), 5, dtype=torch.long))
+        env.backend.qpos[:, env._obj_pos_q] += torch.tensor([0.03, -0.02, 0.01], dtype=env.backend.qpos.dtype)
+        env.object_gain = 1.0
+        return env.object_wrench()[0, 0]
+
+    full, none, half = wrench(1.0), wrench(0.0), wrench(0.5)
+    assert abs(float(full[0])) > 1.0 and abs(float(full[1])) > 1.0  # the offset makes a sideways pull
+    assert torch.all(none[:2] == 0) and torch.equal(none[2:], full[2:])
+    assert torch.allclose(half[:2], full[:2] / 2, rtol=1e-5) and torch.equal(half[2:], full[2:])
+    with pytest.raises(ValueError, match="horizontal"):
+        check_env_config(replace(variant, object_controller=replace(variant.object_controller, horizontal=1.5)))

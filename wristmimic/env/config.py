@@ -188,6 +188,11 @@ class ObjectControllerConfig:
     drawn when the world resets, so at every stage of the curriculum some episodes get less help than the
     batch's gain, down to none with spread 1, and the policy meets the takeover of the object throughout
     instead of only as the gain falls. 0: every world gets the curriculum's gain."""
+    horizontal: float = 1.0
+    """Share of the position PD's horizontal (world x, y) force that is applied; the vertical force, the weight
+    support and the torque are unchanged. 0: the controller holds the object's height, tilt and weight but leaves
+    moving it across the floor to the humanoid, so a pushed object slides away instead of serving as a support it
+    can lean on (``sub2_largetable_000``'s policies lean on the table the full controller drags)."""
     start_hold_frames: int = 0
     """Training only: after a reset at a start frame > 0 the controller also holds that world's objects, at gain
     1 - steps / start_hold_frames (the larger of this and the curriculum's gain), so a start mid-carry, whose
@@ -546,6 +551,8 @@ def check_env_config(cfg: EnvConfig) -> None:
         raise ValueError(f"object_controller.gate must be 'hazard' or 'completion', got {oc.gate!r}")
     if not 0.0 <= oc.recover < oc.survival:
         raise ValueError(f"object_controller.recover must be in [0, survival = {oc.survival}), got {oc.recover}")
+    if not 0.0 <= oc.horizontal <= 1.0:
+        raise ValueError(f"object_controller.horizontal must be in [0, 1], got {oc.horizontal}")
     if not 0.0 < oc.decay <= 1.0:
         raise ValueError(f"object_controller.decay must be in (0, 1], got {oc.decay}")
     if oc.start_hold_frames < 0 or (oc.start_hold_frames > 0 and not oc.enabled):

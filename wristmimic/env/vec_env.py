@@ -256,6 +256,8 @@ class WristMimicEnv:
         self._obj_weight = self._obj_mass[:, 0] * float(np.linalg.norm(m.opt.gravity))
         self._obj_inertia = f32(m.body_inertia[bids].mean(-1))[:, None] if bids else torch.zeros(0, 1, device=dev)
         self._gravity = f32(-m.opt.gravity)
+        h = self.cfg.object_controller.horizontal  # the controller's horizontal share (world x, y; z stays)
+        self._horizontal_share = torch.tensor([h, h, 1.0], dtype=torch.float32, device=dev)
         # root assist (training only): motors on the humanoid root's free joint, if the scene has them
         rac = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"rac_{k}") for k in range(6)]
         self.has_root_assist = min(rac) >= 0
@@ -792,6 +794,8 @@ class WristMimicEnv:
         pos, quat = qpos[:, self._obj_pos_q], qpos[:, self._obj_quat_q]
         lin, ang = qvel[:, self._obj_lin_v], qvel[:, self._obj_ang_v]
         pd = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin)
+        if c.horizontal != 1.0:
+            pd = pd * self._horizontal_share
         rot = quat_to_rotvec(quat_mul(quat_conj(quat), r.obj_quat[f]))  # local frame
         alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)
         # per world: the episode's share of the curriculum's gain (ones without spread), raised by any start hold
