@@ -398,15 +398,18 @@ def test_hand_adhesion_acts_through_contact_on_the_object(dataset: Path) -> None
     assert any(touching and pull > 1.0 for touching, pull in pulls), pulls
 
 
-def test_horizontal_share_scales_only_the_controllers_sideways_force(dataset: Path) -> None:
+def test_horizontal_share_scales_only_the_controllers_sideways_force_while_the_object_moves(dataset: Path) -> None:
     """``horizontal=0`` keeps the vertical force, the weight and the torque of the full controller and drops its
-    world x, y force; 0.5 halves it."""
+    world x, y force while the reference object moves; 0.5 halves it; at rest the full controller holds."""
     variant = variant_config("wristmimic")
 
-    def wrench(horizontal: float) -> torch.Tensor:
+    def wrench(horizontal: float, still: bool = False) -> torch.Tensor:
         cfg = replace(variant, object_controller=replace(variant.object_controller, horizontal=horizontal))
         env = WristMimicEnv.from_file(dataset, SID, 1, cfg, SceneConfig(object_actuators=True))
-        env.reset(start_frames=torch.full((1,), 5, dtype=torch.long))
+        assert float(env.ref.obj_linvel[6, 0].norm()) > 0.2  # the synthetic reference moves its box throughout
+        if still:
+            env.ref.obj_linvel[6] = 0.0  # the reference at rest at the frame aimed at
+        env.reset(start_frames=torch.full((1,), 5, dtype=torch.long))  # the wrench aims at frame 5 + 1
         env.backend.qpos[:, env._obj_pos_q] += torch.tensor([0.03, -0.02, 0.01], dtype=env.backend.qpos.dtype)
         env.object_gain = 1.0
         return env.object_wrench()[0, 0]
@@ -415,5 +418,7 @@ def test_horizontal_share_scales_only_the_controllers_sideways_force(dataset: Pa
     assert abs(float(full[0])) > 1.0 and abs(float(full[1])) > 1.0  # the offset makes a sideways pull
     assert torch.all(none[:2] == 0) and torch.equal(none[2:], full[2:])
     assert torch.allclose(half[:2], full[:2] / 2, rtol=1e-5) and torch.equal(half[2:], full[2:])
+    at_rest = wrench(1.0, still=True)
+    assert abs(float(at_rest[0])) > 1.0 and torch.equal(wrench(0.0, still=True), at_rest)
     with pytest.raises(ValueError, match="horizontal"):
         check_env_config(replace(variant, object_controller=replace(variant.object_controller, horizontal=1.5)))

@@ -189,10 +189,13 @@ class ObjectControllerConfig:
     batch's gain, down to none with spread 1, and the policy meets the takeover of the object throughout
     instead of only as the gain falls. 0: every world gets the curriculum's gain."""
     horizontal: float = 1.0
-    """Share of the position PD's horizontal (world x, y) force that is applied; the vertical force, the weight
-    support and the torque are unchanged. 0: the controller holds the object's height, tilt and weight but leaves
-    moving it across the floor to the humanoid, so a pushed object slides away instead of serving as a support it
-    can lean on (``sub2_largetable_000``'s policies lean on the table the full controller drags)."""
+    """Share of the position PD's horizontal (world x, y) force that is applied while the reference object moves
+    (faster than the drive factor's 5 cm/s); at rest, and for the vertical force, the weight support and the
+    torque, the controller is unchanged. 0: while the reference carries the object the controller holds its
+    height, tilt and weight but leaves moving it across the floor to the humanoid, so a pushed object slides away
+    instead of serving as a support it can lean on (``sub2_largetable_000``'s policies lean on the table the full
+    controller drags); at rest it still holds the object in place, so a touch on the way to the grasp does not
+    slide an object whose weight it carries."""
     start_hold_frames: int = 0
     """Training only: after a reset at a start frame > 0 the controller also holds that world's objects, at gain
     1 - steps / start_hold_frames (the larger of this and the curriculum's gain), so a start mid-carry, whose

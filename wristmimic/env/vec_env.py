@@ -40,7 +40,7 @@ from wristmimic.env.observations import (
 )
 from wristmimic.env.reference import Reference, load_reference
 from wristmimic.env.rewards import CONSTANTS as REWARD_CONSTANTS
-from wristmimic.env.rewards import RewardInputs, compute_reward, ig_weights, sq_dists
+from wristmimic.env.rewards import DRIVE_MIN_SPEED, RewardInputs, compute_reward, ig_weights, sq_dists
 from wristmimic.env.squeeze import squeeze_offsets
 from wristmimic.env.starts import AdaptiveStarts, StateBank
 from wristmimic.env.synergy import HANDS as SYNERGY_HANDS
@@ -794,8 +794,9 @@ class WristMimicEnv:
         pos, quat = qpos[:, self._obj_pos_q], qpos[:, self._obj_quat_q]
         lin, ang = qvel[:, self._obj_lin_v], qvel[:, self._obj_ang_v]
         pd = c.kp * (r.obj_pos[f] - pos) + c.kd * (r.obj_linvel[f] - lin)
-        if c.horizontal != 1.0:
-            pd = pd * self._horizontal_share
+        if c.horizontal != 1.0:  # only while the reference object moves: at rest it is held in place
+            moving = r.obj_linvel[f].norm(dim=-1, keepdim=True) > DRIVE_MIN_SPEED
+            pd = torch.where(moving, pd * self._horizontal_share, pd)
         rot = quat_to_rotvec(quat_mul(quat_conj(quat), r.obj_quat[f]))  # local frame
         alpha = c.kr * rot + c.dr * (r.obj_angvel_local[f] - ang)
         # per world: the episode's share of the curriculum's gain (ones without spread), raised by any start hold
