@@ -17,6 +17,11 @@ controller. Reported per rollout over the frames where the reference has a hand 
 source's mean vertical force as a share of the object's weight, and ``drive`` (N), each source's mean force along
 the reference object's horizontal direction of motion over the frames where it moves faster than 5 cm/s (floor
 friction against a drag is negative). A curriculum that works moves the load from the controller to the hands.
+
+``--trace``: where and how each rollout drifts off, per frame (stepped-to state, before any reset): the object's
+centre error (cm) and rotation error (deg) as the evaluation measures them, the mean wrist error (cm), the root's
+offset from the reference root (x, y, z, cm; absent at the terminating frame, whose world is already reset) and
+which hands touch the object in simulation and in the reference. Printed every 8th frame and at the last one.
 """
 
 from __future__ import annotations
@@ -100,9 +105,31 @@ def summarize_loads(forces: np.ndarray, frames: np.ndarray, ref: Any, weight: fl
     }
 
 
-def rollouts(run: Path, gains: list[float], weights: str = "latest", loads: bool = False) -> list[dict[str, Any]]:
+def trace_rows(env: WristMimicEnv, info: dict[str, Any], frame: int, live: list[int], done: torch.Tensor) -> list[dict]:
+    """One ``--trace`` row per world in ``live`` at the stepped-to ``frame`` (see the module's docstring)."""
+    e = info["eval"]
+    root = env.sim_state().body_pos[:, 0] - env.ref.body_pos[frame, 0]  # reset worlds: not the stepped-to state
+    rows = []
+    for i in live:
+        row = {
+            "frame": frame,
+            "obj_cm": round(100 * float(e["obj_pos"][i]), 2),
+            "obj_deg": round(float(np.degrees(float(e["obj_rot"][i]))), 2),
+            "wrist_cm": round(100 * float(e["wrist_pos"][i]), 2),
+            "root_cm": None if bool(done[i]) else [round(100 * float(v), 2) for v in root[i]],
+            "sim_hand": [int(v) for v in e["sim_hand"][i]],
+            "ref_hand": [int(v) for v in e["ref_hand"][i]],
+        }
+        rows.append(row)
+    return rows
+
+
+def rollouts(
+    run: Path, gains: list[float], weights: str = "latest", loads: bool = False, trace: bool = False
+) -> list[dict[str, Any]]:
     """Per gain: ``{"gain", "frames", "reason"}`` of one deterministic frame-0 rollout with that much help (with
-    ``loads``: also ``"lift"`` and ``"drive"``, see :func:`summarize_loads`)."""
+    ``loads``: also ``"lift"`` and ``"drive"``, see :func:`summarize_loads`; with ``trace``: ``"trace"``, one row
+    per frame, see :func:`trace_rows`)."""
     policy = load_eval_policy(run, weights)
     cfg = json.loads((run / "config.json").read_text())
     env_cfg = env_config_from_dict(cfg["env"])
@@ -116,14 +143,21 @@ def rollouts(run: Path, gains: list[float], weights: str = "latest", loads: bool
     out: list[dict[str, Any] | None] = [None] * len(gains)
     meter = LoadMeter(env) if loads else None
     forces: list[list[np.ndarray]] = [[] for _ in gains]
+    rows: list[list[dict]] = [[] for _ in gains]
+    env.eval_info = trace
     with torch.no_grad():
         for step in range(env.ref.num_frames):
             obs, _, term, trunc, info = env.step(policy.act(obs, deterministic=True))
-            if meter is not None:  # before resets: the state just stepped to
-                for i in range(len(gains)):
-                    if out[i] is None:
+            done = term | trunc
+            live = [i for i in range(len(gains)) if out[i] is None]
+            if meter is not None:  # the state just stepped to: not in a world that ended (and was reset) here
+                for i in live:
+                    if not bool(done[i]):
                         forces[i].append(meter(i))
-            for i in torch.nonzero(term | trunc).flatten().tolist():
+            if trace:
+                for i, row in zip(live, trace_rows(env, info, step + 1, live, done), strict=True):
+                    rows[i].append(row)
+            for i in torch.nonzero(done).flatten().tolist():
                 if out[i] is None:
                     reason = REASONS[int(info["termination_reason"][i])] if bool(term[i]) else "end"
                     out[i] = {"gain": gains[i], "frames": step + 1, "reason": reason}
@@ -136,8 +170,26 @@ def rollouts(run: Path, gains: list[float], weights: str = "latest", loads: bool
     ]
     if meter is not None:
         for r, f in zip(res, forces, strict=True):
-            r.update(summarize_loads(np.stack(f), np.arange(1, len(f) + 1), env.ref, meter.weight))
+            stacked = np.stack(f) if f else np.zeros((0, len(SOURCES), 3))
+            r.update(summarize_loads(stacked, np.arange(1, len(f) + 1), env.ref, meter.weight))
+    if trace:
+        for r, t in zip(res, rows, strict=True):
+            r["trace"] = t
     return res
+
+
+def print_trace(res: dict[str, Any]) -> None:
+    """Every 8th ``--trace`` row of one rollout and its last."""
+    print(f"  gain {res['gain']:.2f}: frame  object cm  deg  wrist cm  root offset cm (x y z)  hands sim/ref")
+    rows = res["trace"]
+    for row in rows:
+        if row["frame"] % 8 and row is not rows[-1]:
+            continue
+        root = " ".join(f"{v:6.1f}" for v in row["root_cm"]) if row["root_cm"] is not None else "   (reset)        "
+        print(
+            f"  {row['frame']:17d}  {row['obj_cm']:9.1f} {row['obj_deg']:4.1f}  {row['wrist_cm']:8.1f}  {root:>22s}"
+            f"  {row['sim_hand']}/{row['ref_hand']}"
+        )
 
 
 def main() -> None:
@@ -146,19 +198,22 @@ def main() -> None:
     ap.add_argument("--gains", type=lambda t: [float(v) for v in t.split(",")], default=[1.0, 0.8, 0.6, 0.4, 0.2, 0.0])
     ap.add_argument("--weights", choices=("latest", "deployed"), default="latest")
     ap.add_argument("--loads", action="store_true", help="also report who carries the object (see above)")
+    ap.add_argument("--trace", action="store_true", help="also report the errors frame by frame (see above)")
     ap.add_argument("-o", "--output", type=Path)
     args = ap.parse_args()
     if not (args.run / "config.json").is_file():
         raise SystemExit(f"error: {args.run}: not a training run folder (no config.json)")
     if any(not 0.0 <= g <= 10.0 for g in args.gains):
         raise SystemExit(f"error: --gains: each gain must be in [0, 10], got {args.gains}")
-    res = rollouts(args.run, args.gains, args.weights, args.loads)
+    res = rollouts(args.run, args.gains, args.weights, args.loads, args.trace)
     for r in res:
         line = f"gain {r['gain']:.2f}: {r['frames']} frames ({r['reason']})"
         if args.loads:
             line += "; lift " + " ".join(f"{k} {v:.2f}" for k, v in r["lift"].items())
             line += "; drive (N) " + " ".join(f"{k} {v:.0f}" for k, v in r["drive"].items())
         print(line)
+        if args.trace:
+            print_trace(r)
     if args.output:
         with atomic_output(args.output) as tmp:
             Path(tmp).write_text(json.dumps({"run": str(args.run), "weights": args.weights, "rollouts": res}, indent=1))

@@ -418,6 +418,14 @@ def test_assisted_rollout_gives_each_world_its_own_share_of_the_controller(datas
     assert one == script["rollouts"](tmp_path / "run", gains)  # deterministic
     assert [r["gain"] for r in one] == gains
     assert all(1 <= r["frames"] <= 40 and r["reason"] in ("end", *REASONS.values()) for r in one)
+    traced = script["rollouts"](tmp_path / "run", gains, trace=True)  # --trace: one row per frame, same rollouts
+    assert [{k: v for k, v in r.items() if k != "trace"} for r in traced] == one
+    for r in traced:
+        assert [row["frame"] for row in r["trace"]] == list(range(1, r["frames"] + 1))
+        assert all(row["root_cm"] is not None for row in r["trace"][:-1]) and r["trace"][-1]["root_cm"] is None
+        assert abs(r["trace"][0]["root_cm"][2]) < 5.0  # one step from the reference's own start
+    err = [np.mean([row["obj_cm"] for row in r["trace"]]) for r in traced]
+    assert err[0] < err[2]  # full help holds the object nearer its reference than none (rows not mixed up)
     cfg = variant_config("wristmimic")
     env = WristMimicEnv.from_file(dataset, SID, 3, cfg, SceneConfig(object_actuators=True), seed=0)
     env.reset(start_frames=torch.full((3,), 10, dtype=torch.long))
