@@ -15,6 +15,7 @@ set ``MUJOCO_GL=egl`` (or ``osmesa``) on a machine without a display.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import mujoco
@@ -69,7 +70,7 @@ def render(
     opt.geomgroup[:] = [1, 1, 0, 1, 0, 0]  # group 2: the objects' visual meshes
     qpos, _ = env.reference_state(torch.as_tensor(frames))
     rows = []
-    with mujoco.Renderer(m, size, size) as r:
+    with _renderer(m, size) as r:
         for q in qpos.numpy():
             d.qpos[:] = q
             mujoco.mj_forward(m, d)
@@ -82,6 +83,19 @@ def render(
             rows.append(np.concatenate(row, axis=1))
     env.close()
     return np.concatenate(rows, axis=0)
+
+
+def _renderer(m: mujoco.MjModel, size: int) -> mujoco.Renderer:
+    """An offscreen renderer, or a one-line error naming MUJOCO_GL when no OpenGL context can be made (a machine
+    without a display needs ``MUJOCO_GL=egl`` or ``osmesa``; the default, GLFW, needs an X display)."""
+    try:
+        return mujoco.Renderer(m, size, size)
+    except Exception as e:  # mujoco.FatalError from mjr_makeContext, or the GL backend's own import error
+        gl = os.environ.get("MUJOCO_GL", "unset: GLFW, which needs a display")
+        raise SystemExit(
+            f"error: no OpenGL context for rendering (MUJOCO_GL {gl}): run with MUJOCO_GL=egl (or osmesa) "
+            f"({type(e).__name__}: {str(e).splitlines()[0][:120]})"
+        ) from None
 
 
 def main() -> None:

@@ -65,3 +65,18 @@ def test_bad_views_are_refused_with_one_line() -> None:
     assert script["parse_views"]("0:-20,90:5") == [(0.0, -20.0), (90.0, 5.0)]
     with pytest.raises(SystemExit, match="azimuth:elevation"):
         script["parse_views"]("0,-20")
+
+
+def test_no_opengl_context_is_one_line_naming_mujoco_gl(synth: Path, tmp_path: Path) -> None:
+    """Without MUJOCO_GL and without a display (GLFW cannot open a window), the script says to set MUJOCO_GL."""
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        pytest.skip("a display is present: GLFW may open a context")
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    out = tmp_path / "frames.png"
+    args = [str(synth), "--scene", "synth_default", "--frames", "0", "--body", "R_Wrist", "--size", "16"]
+    r = subprocess.run(
+        [sys.executable, str(SCRIPT_PATH), *args, "-o", str(out)], env=env, capture_output=True, text=True, timeout=300
+    )
+    last = r.stderr.strip().splitlines()[-1]
+    assert r.returncode != 0 and last.startswith("error: no OpenGL context") and "MUJOCO_GL=egl" in last
+    assert not out.exists()
