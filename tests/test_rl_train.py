@@ -689,6 +689,13 @@ def test_warm_start_takes_the_source_policy_resets_its_statistics_and_is_recorde
     assert json.loads((tmp_path / "a" / "config.json").read_text())["init"]["sha256"] == record["sha256"]
     assert _rows(tmp_path / "a") == _rows(tmp_path / "b")
     assert _rows(tmp_path / "a") != _rows(tmp_path / "src")
+    # the run keeps the bytes it started from (init.pt), so it starts again the same after the source trained on
+    assert sha256_file(tmp_path / "a" / "init.pt") == record["sha256"]
+    assert json.loads((tmp_path / "a" / "config.json").read_text())["init"]["copy"] == "init.pt"
+    resume_run(tmp_path / "src", max_frames=128, nthread=1, progress=False)
+    assert sha256_file(tmp_path / "src" / "checkpoint.pt") != record["sha256"]
+    start_run(replace(spec, init_from=tmp_path / "a" / "init.pt"), tmp_path / "again", nthread=1, progress=False)
+    assert _rows(tmp_path / "again") == _rows(tmp_path / "a")
     # another network size: one line naming the source's weights, and no folder left behind
     wide = replace(spec, ppo=preset("cpu", **{**TINY, "actor_hidden": (16,)}, max_frames=64))
     with pytest.raises(InputError, match=r"actor\.0\.weight.*shape"):

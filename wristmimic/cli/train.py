@@ -48,7 +48,8 @@ def train_cmd(
         "--init-from",
         help="Warm start: begin from this run folder's (or checkpoint's) policy instead of fresh networks, e.g. a "
         "body-only stage (scripts/body_only.py) before the scene with its object. Needs the same observation and "
-        "action sizes and network; observation statistics are re-estimated. config.json records the source.",
+        "action sizes and network; observation statistics are re-estimated. config.json records the source, and the "
+        "run folder keeps a copy of it as init.pt (start from that to repeat the run after the source trained on).",
     ),
     init_weights: str = typer.Option(
         "deployed", "--init-weights", help="Which weights --init-from takes: deployed (what evaluate loads) or latest."

@@ -18,7 +18,10 @@ from wristmimic.safe_io import OutputError, atomic_output, torch_load_untrusted
 CHECKPOINT_NAME = "checkpoint.pt"
 CHECKPOINT_FORMAT = "wristmimic-ppo-checkpoint"
 CHECKPOINT_VERSION = 1
-RUN_FILES = ("config.json", "metrics.csv", CHECKPOINT_NAME)
+INIT_NAME = "init.pt"
+"""A warm-started run's copy of the checkpoint it started from (``--init-from``), taken when it started, so the run
+can be started again from it after the source has trained on (``--init-from RUN/init.pt``)."""
+RUN_FILES = ("config.json", "metrics.csv", CHECKPOINT_NAME, INIT_NAME)
 """The files of a run folder."""
 
 
