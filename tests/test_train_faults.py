@@ -240,6 +240,30 @@ def test_a_checkpoint_write_on_a_full_disk_fails_in_one_line_and_keeps_the_previ
     assert _assert_finite_checkpoint(run)["iteration"] == 2  # a resume continues from here (as after a kill)
 
 
+def test_a_warm_start_whose_source_copy_does_not_fit_fails_in_one_line_and_leaves_no_folder(
+    dataset: Path, reference: Path, tmp_path: Path
+) -> None:
+    """``--init-from`` copies the source checkpoint (into a private snapshot, then the run's ``init.pt``); on a full
+    disk the start stops with one line and leaves no run folder, and with room the same start keeps the copy."""
+    limit = (reference / "checkpoint.pt").stat().st_size // 2  # config.json fits, a checkpoint copy does not
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+    out = tmp_path / "runs"
+    args = [*_train_args(dataset, out, FRAMES), "--init-from", str(reference), "--init-weights", "latest"]
+    r = _subprocess(*args, preexec_fn=small_files)
+    assert r.returncode == 1, r.stdout + r.stderr
+    err = _assert_one_line_error(r.stderr, "checkpoint.pt")
+    assert "cannot be copied" in err or "not written" in err, err
+    assert not out.exists() or not any(out.iterdir())
+    r = _subprocess(*args)
+    assert r.returncode == 0, r.stderr
+    (run,) = out.iterdir()
+    assert (run / "init.pt").read_bytes() == (reference / "checkpoint.pt").read_bytes()
+
+
 def test_a_metrics_row_that_does_not_fit_is_cut_off(tmp_path: Path) -> None:
     """A real file-size limit in a subprocess: rows are appended until one does not fit; the file ends with the
     last complete row and the error is one line."""
