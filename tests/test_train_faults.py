@@ -243,8 +243,8 @@ def test_a_checkpoint_write_on_a_full_disk_fails_in_one_line_and_keeps_the_previ
 def test_a_warm_start_whose_source_copy_does_not_fit_fails_in_one_line_and_leaves_no_folder(
     dataset: Path, reference: Path, tmp_path: Path
 ) -> None:
-    """``--init-from`` copies the source checkpoint (into a private snapshot, then the run's ``init.pt``); on a full
-    disk the start stops with one line and leaves no run folder, and with room the same start keeps the copy."""
+    """``--init-from`` keeps a copy of the source checkpoint as the run's ``init.pt``; on a full disk the start stops
+    with one line naming the source and leaves no run folder, and with room the same start keeps the copy."""
     limit = (reference / "checkpoint.pt").stat().st_size // 2  # config.json fits, a checkpoint copy does not
 
     def small_files() -> None:

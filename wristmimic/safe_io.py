@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import hashlib
+import io
 import os
 import pickle
 import re
@@ -360,8 +361,9 @@ def _torch_load_error(path: Path, exc: Exception, what: str) -> InputError:
     return InputError(path, "<file>", f"not a torch file (cannot be read: {reason})", what)
 
 
-def torch_load_untrusted(path: str | Path, what: str) -> object:
-    """``torch.load(path, weights_only=True, map_location="cpu")`` for a file from elsewhere.
+def torch_load_untrusted(path: str | Path, what: str, data: bytes | None = None) -> object:
+    """``torch.load(path, weights_only=True, map_location="cpu")`` for a file from elsewhere (``data``: the file's
+    bytes, already read; ``path`` then only names it).
 
     Tensors and plain containers load (on the CPU); nothing in the file is run. Every failure is one
     :class:`InputError` naming the file, with ``what`` (e.g. ``"a tensor saved by torch.save"``) as the
@@ -376,7 +378,7 @@ def torch_load_untrusted(path: str | Path, what: str) -> object:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return torch.load(path, weights_only=True, map_location="cpu")
+            return torch.load(path if data is None else io.BytesIO(data), weights_only=True, map_location="cpu")
     except Exception as exc:  # noqa: BLE001 - KeyError, EOFError, RuntimeError, OSError (EINVAL), ... for bad files
         raise _torch_load_error(path, exc, what) from None
 

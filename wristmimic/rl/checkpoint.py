@@ -197,11 +197,12 @@ def _check_deploy(path: Path, state: dict[str, Any]) -> None:
             raise InputError(path, f"deploy.{key}", "missing or not an integer", _EXPECTED)
 
 
-def load_checkpoint(run_dir_or_file: str | Path) -> dict[str, Any]:
+def load_checkpoint(run_dir_or_file: str | Path, data: bytes | None = None) -> dict[str, Any]:
     """Load a checkpoint on the CPU without running code from the file; one-line :class:`InputError` for a file
-    that is not a complete wristmimic checkpoint (text, random bytes, a refused pickle, a missing config, ...)."""
+    that is not a complete wristmimic checkpoint (text, random bytes, a refused pickle, a missing config, ...).
+    ``data``: the checkpoint file's bytes, already read."""
     path = checkpoint_path(run_dir_or_file)
-    state = torch_load_untrusted(path, _EXPECTED)
+    state = torch_load_untrusted(path, _EXPECTED, data)
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise InputError(path, "format", "not a wristmimic PPO checkpoint", _EXPECTED)
     if state.get("version") != CHECKPOINT_VERSION:

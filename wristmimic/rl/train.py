@@ -6,12 +6,10 @@ A run folder holds ``config.json`` (everything that defines the run), ``metrics.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
-import os
-import shutil
-import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -32,7 +30,7 @@ from wristmimic.rl.checkpoint import (
 )
 from wristmimic.rl.config import PPOConfig, dumps, from_jsonable, preset, preset_env, to_jsonable
 from wristmimic.rl.runner import Runner, TrainingError
-from wristmimic.safe_io import atomic_output, sha256_file
+from wristmimic.safe_io import OutputError, atomic_output, sha256_file
 from wristmimic.scene import SceneConfig, scene_config_from_dict
 from wristmimic.sim.backend import BACKENDS
 
@@ -201,27 +199,22 @@ def start_run(
         raise InputError(None, "backend", f"unknown backend {spec.backend!r}", f"one of {', '.join(BACKENDS)}")
     spec = _for_backend(spec)
     env_cfg = spec.env or preset_env(spec.preset, spec.variant)
-    with _init_snapshot(spec) as snap:
-        source = _init_source(spec, snap)
-        config = _config_dict(spec, env_cfg, sha256_file(data), None if source is None else source[2])
-        runner = _build(config, run_dir, nthread, data)  # before the folder exists: a scene that fails leaves none
-        if source is not None:
-            path, entry, _, weights = source
-            try:
-                runner.warm_start(path, entry, weights, reset_normalizer=spec.init_normalizer == "reset")
-            except BaseException:
-                runner.env.close()
-                raise
-        made = [d for d in (run_dir, *run_dir.parents) if not d.exists()]
+    blob = _read_init(spec)
+    source = _init_source(spec, blob)
+    config = _config_dict(spec, env_cfg, sha256_file(data), None if source is None else source[2])
+    runner = _build(config, run_dir, nthread, data)  # before the folder exists: a scene that fails leaves none
+    if source is not None:
+        path, entry, _, weights = source
         try:
-            _write_config(run_dir, config)
-            if snap is not None:
-                _keep_init_copy(snap, run_dir)
+            runner.warm_start(path, entry, weights, reset_normalizer=spec.init_normalizer == "reset")
         except BaseException:
             runner.env.close()
-            _remove_unsaved_run(run_dir, made)
             raise
+    made = [d for d in (run_dir, *run_dir.parents) if not d.exists()]
     try:
+        _write_config(run_dir, config)
+        if blob is not None:
+            _keep_init_copy(blob, source[0], run_dir)
         runner.optimise_feedforward(progress)
         status = runner.learn(spec.ppo.max_frames, progress, should_stop)
     except BaseException as exc:
@@ -248,42 +241,32 @@ INIT_WEIGHTS = ("deployed", "latest")
 INIT_NORMALIZER = ("reset", "source")
 
 
-@contextlib.contextmanager
-def _init_snapshot(spec: TrainSpec) -> Iterator[Path | None]:
-    """A private copy of the ``--init-from`` checkpoint (None without a warm start), removed on exit: the hash, the
-    weights and the run's kept copy (:data:`INIT_NAME`) all come from the same bytes, even while the source run
-    trains on and replaces its checkpoint."""
+def _read_init(spec: TrainSpec) -> bytes | None:
+    """The ``--init-from`` checkpoint's bytes, read once (None without a warm start): the hash, the weights and the
+    run's kept copy (:data:`INIT_NAME`) all come from them, even while the source run trains on and replaces its
+    checkpoint."""
     if spec.init_from is None:
-        yield None
-        return
+        return None
     path = checkpoint_path(spec.init_from)
-    fd, name = tempfile.mkstemp(prefix="wristmimic-init-", suffix=".pt")
-    os.close(fd)
-    snap = Path(name)
     try:
-        try:
-            shutil.copyfile(path, snap)
-        except OSError as exc:
-            raise InputError(path, None, f"cannot be copied ({exc.strerror})") from None
-        yield snap
-    finally:
-        snap.unlink(missing_ok=True)
+        return path.read_bytes()
+    except OSError as exc:
+        raise InputError(path, None, f"cannot be read ({exc.strerror})") from None
 
 
-def _keep_init_copy(snap: Path, run_dir: Path) -> None:
-    """Write the warm start's checkpoint into the new run folder (atomically) as :data:`INIT_NAME`."""
+def _keep_init_copy(blob: bytes, source: Path, run_dir: Path) -> None:
+    """Write the warm start's checkpoint bytes into the new run folder (atomically) as :data:`INIT_NAME`."""
     try:
         with atomic_output(run_dir / INIT_NAME, suffix=".pt") as tmp:
-            shutil.copyfile(snap, tmp)
-    except OSError as exc:
-        raise InputError(run_dir / INIT_NAME, None, f"not written ({exc.strerror})") from None
+            tmp.write_bytes(blob)
+    except (OSError, OutputError) as exc:  # a full disk: OutputError from atomic_output
+        reason = exc.reason if isinstance(exc, OutputError) else exc.strerror
+        raise InputError(run_dir / INIT_NAME, None, f"copy of {source} not written ({reason})") from None
 
 
-def _init_source(
-    spec: TrainSpec, snapshot: Path | None = None
-) -> tuple[Path, str, dict[str, Any], dict[str, Any]] | None:
+def _init_source(spec: TrainSpec, blob: bytes | None = None) -> tuple[Path, str, dict[str, Any], dict[str, Any]] | None:
     """The warm start's checkpoint path, weights entry, ``config.json`` record and weights; None: no warm start.
-    ``snapshot``: read the weights and the hash from this copy of the checkpoint (errors still name the source)."""
+    ``blob``: the checkpoint's bytes as :func:`_read_init` read them (None: read the file here)."""
     if spec.init_from is None:
         return None
     if spec.init_weights not in INIT_WEIGHTS:
@@ -293,17 +276,13 @@ def _init_source(
             None, "init_normalizer", f"unknown choice {spec.init_normalizer!r}", " or ".join(INIT_NORMALIZER)
         )
     path = checkpoint_path(spec.init_from)
-    read = path if snapshot is None else snapshot
-    try:
-        state = load_checkpoint(read)
-    except InputError as exc:  # name the user's file, not the private copy
-        raise InputError(path, exc.key, exc.problem, exc.expected) from None
+    state = load_checkpoint(path, blob)
     entry = "deploy_policy" if spec.init_weights == "deployed" and "deploy_policy" in state else "policy"
     source = json.loads(state["config"])
     record = {
         "path": str(path.resolve()),
-        "sha256": sha256_file(read),
-        "copy": None if snapshot is None else INIT_NAME,
+        "sha256": sha256_file(path) if blob is None else hashlib.sha256(blob).hexdigest(),
+        "copy": None if blob is None else INIT_NAME,
         "weights": spec.init_weights,
         "normalizer": spec.init_normalizer,
         "entry": entry,
