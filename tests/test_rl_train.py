@@ -581,7 +581,8 @@ def test_deployed_best_is_the_best_periodic_evaluation_and_resumes(
     assert seeds == [12345] * 3
     state = load_checkpoint(tmp_path / "run")
     assert state["deploy"] == {
-        "weights": "best", "iteration": 2, "frames": 64, "eval_success_rate": 0.5, "eval_strict_success_rate": 0.5
+        "weights": "best", "iteration": 2, "frames": 64, "eval_success_rate": 0.5, "eval_strict_success_rate": 0.5,
+        "eval_trials": 32,
     }  # fmt: skip
     start_run(_spec(dataset, 2), tmp_path / "two", nthread=1, progress=False)  # the same training, stopped at 2
     assert _same_params(state["deploy_policy"], _params(tmp_path / "two"))
@@ -593,6 +594,81 @@ def test_deployed_best_is_the_best_periodic_evaluation_and_resumes(
     resume_run(tmp_path / "split", max_frames=96, nthread=1, progress=False)
     split = load_checkpoint(tmp_path / "split")
     assert split["deploy"] == state["deploy"] and _same_params(split["deploy_policy"], state["deploy_policy"])
+
+
+def test_confirming_trials_rank_a_candidate_by_all_its_trials(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # scripted rates on 4 trials, then successes of the 4 confirming trials (paper rule = strict rule here)
+    small = {1: 0.5, 2: 1.0, 3: 0.75, 4: 0.0}
+    confirm = {1: 4, 2: 0, 3: 4}
+    calls: list[tuple[int, int, int]] = []
+
+    def fake_eval(self: Runner) -> dict[str, float]:
+        return {"eval/success_rate": small[self.iteration], "eval/strict_success_rate": small[self.iteration]}
+
+    def fake_trials(self: Runner, start: int, stop: int) -> dict[str, np.ndarray]:
+        calls.append((self.iteration, start, stop))
+        won = np.arange(stop - start) < confirm[self.iteration]
+        return {"success": won, "strict_success": won}
+
+    monkeypatch.setattr(Runner, "periodic_eval", fake_eval)
+    monkeypatch.setattr(Runner, "_eval_trials", fake_trials)
+    kw = dict(deploy_best=True, eval_every=1, eval_trials=4, eval_confirm_trials=4)
+    start_run(_spec(dataset, 4, **kw), tmp_path / "run", nthread=1, progress=False)
+    # iteration 2's 4 of 4 falls to 4 of 8 and loses to iteration 1's 6 of 8; iteration 3's 7 of 8 wins;
+    # iteration 4 (no success) and nothing below the best runs confirming trials
+    assert calls == [(1, 4, 8), (2, 4, 8), (3, 4, 8)]
+    state = load_checkpoint(tmp_path / "run")
+    assert state["deploy"] == {
+        "weights": "best", "iteration": 3, "frames": 96, "eval_success_rate": 0.875, "eval_strict_success_rate": 0.875,
+        "eval_trials": 8,
+    }  # fmt: skip
+    rows = _rows(tmp_path / "run")
+    assert [r["eval/confirm_success_rate"] for r in rows][:3] == ["0.75", "0.5", "0.875"]
+    assert rows[3]["eval/confirm_strict_success_rate"] == "nan"
+    # a resume keeps the confirmed figures: a later 0.75 on 4 trials confirmed to 0.5 does not replace them
+    small[5], confirm[5] = 1.0, 0
+    resume_run(tmp_path / "run", max_frames=160, nthread=1, progress=False)
+    assert load_checkpoint(tmp_path / "run")["deploy"]["iteration"] == 3 and calls[-1] == (5, 4, 8)
+    # without confirmation iteration 2's lucky 4 of 4 is deployed, and no confirming column is logged
+    calls.clear()
+    start_run(_spec(dataset, 4, **{**kw, "eval_confirm_trials": 0}), tmp_path / "plain", nthread=1, progress=False)
+    assert calls == [] and load_checkpoint(tmp_path / "plain")["deploy"]["iteration"] == 2
+    plain = _rows(tmp_path / "plain")
+    assert "eval/confirm_success_rate" not in plain[0]
+    train_only = [{k: v for k, v in r.items() if not k.startswith("eval/")} for r in rows]
+    assert [{k: v for k, v in r.items() if not k.startswith("eval/")} for r in plain] == train_only  # same training
+    with pytest.raises(InputError, match="eval_confirm_trials"):
+        preset("cpu", eval_confirm_trials=-1)
+
+
+def test_confirming_trials_are_the_selection_protocols_next_trials(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the periodic evaluation's 4 trials scripted as 2 successes; the 4 confirming ones run for real
+    seen: list[dict[str, np.ndarray]] = []
+
+    def half(self: Runner) -> dict[str, float]:
+        seen.extend([self._eval_trials(0, 8), self._eval_trials(4, 8)])
+        return {"eval/success_rate": 0.5, "eval/strict_success_rate": 0.5}
+
+    monkeypatch.setattr(Runner, "periodic_eval", half)
+    kw = dict(deploy_best=True, eval_every=1, eval_trials=4, eval_confirm_trials=4, eval_base_seed=12345)
+    start_run(_spec(dataset, 2, **kw), tmp_path / "run", nthread=1, progress=False)
+    first8, next4 = seen[:2]
+    for key, col in next4.items():  # trials 4..7 of the protocol, seeded as in a run of all eight
+        np.testing.assert_array_equal(col, first8[key][4:], err_msg=key)
+    row = _rows(tmp_path / "run")[0]
+    assert float(row["eval/confirm_success_rate"]) == (2 + next4["success"].sum()) / 8
+    assert float(row["eval/confirm_strict_success_rate"]) == (2 + next4["strict_success"].sum()) / 8
+    assert load_checkpoint(tmp_path / "run")["deploy"]["eval_trials"] == 8
+    # evaluation trials leave training alone: the same rows and weights as a run that evaluates nothing
+    start_run(_spec(dataset, 2, eval_every=0), tmp_path / "plain", nthread=1, progress=False)
+    assert [{k: v for k, v in r.items() if not k.startswith("eval/")} for r in _rows(tmp_path / "run")] == [
+        {k: v for k, v in r.items() if not k.startswith("eval/")} for r in _rows(tmp_path / "plain")
+    ]
+    assert _same_params(_params(tmp_path / "run"), _params(tmp_path / "plain"))
 
 
 def test_deploy_best_without_periodic_evaluation_deploys_the_latest(dataset: Path, tmp_path: Path) -> None:

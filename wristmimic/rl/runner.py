@@ -198,6 +198,8 @@ class Runner:
                         later, banked = (self.env.start_counts - starts_before).tolist()
                         row["starts/banked"] = banked / later if later else math.nan
                     row |= {k: evaluation.get(k, math.nan) for k in EVAL_COLUMNS}
+                    if self.cfg.eval_confirm_trials > 0:
+                        row |= {k: evaluation.get(k, math.nan) for k in CONFIRM_COLUMNS}
                     try:
                         self.metrics.write(row)
                     except InputError as exc:
@@ -248,14 +250,21 @@ class Runner:
         strict = evaluation.get("eval/strict_success_rate", 0.0)
         if not self.cfg.deploy_best or rate is None:
             return
-        if self.best and (strict, rate) < (
-            self.best.get("eval_strict_success_rate", 0.0),
-            self.best["eval_success_rate"],
-        ):
+        best = (self.best.get("eval_strict_success_rate", 0.0), self.best["eval_success_rate"]) if self.best else None
+        if best is not None and (strict, rate) < best:
             return
+        trials, extra = self.cfg.eval_trials, self.cfg.eval_confirm_trials
+        if extra > 0 and (strict, rate) != (0.0, 0.0):  # a candidate with no success has nothing to confirm
+            more = self._eval_trials(trials, trials + extra)
+            strict = (strict * trials + float(more["strict_success"].sum())) / (trials + extra)
+            rate = (rate * trials + float(more["success"].sum())) / (trials + extra)
+            trials += extra
+            evaluation |= {"eval/confirm_success_rate": rate, "eval/confirm_strict_success_rate": strict}
+            if best is not None and (strict, rate) < best:
+                return
         weights = {k: v.detach().clone() for k, v in self.candidate.state_dict().items()}
         self.best = {"policy": weights, "iteration": self.iteration, "frames": self.frames, "eval_success_rate": rate}
-        self.best["eval_strict_success_rate"] = strict
+        self.best |= {"eval_strict_success_rate": strict, "eval_trials": trials}
 
     def deployment(self) -> tuple[dict[str, torch.Tensor] | None, dict[str, Any]]:
         """The weights evaluation, ``view`` and ``export`` load (None: the latest) and what they are: ``weights``
@@ -416,6 +425,18 @@ class Runner:
         ``wristmimic evaluate`` runs them (seeded action noise, the run's terminations, no object controller):
         ``eval/success_rate``, ``eval/frames_completed`` (mean), ``eval/obj_pos_err_cm``, ``eval/contact_ratio``,
         ``eval/strict_success_rate`` (see :mod:`wristmimic.evaluate.metrics`)."""
+        col = self._eval_trials(0, self.cfg.eval_trials)
+        return {
+            "eval/success_rate": float(col["success"].mean()),
+            "eval/strict_success_rate": float(col["strict_success"].mean()),
+            "eval/frames_completed": float(col["frames_completed"].mean()),
+            "eval/obj_pos_err_cm": float(np.nanmean(col["obj_pos_err_cm"])),
+            "eval/contact_ratio": float(np.nanmean(col["contact_ratio"])),
+        }
+
+    def _eval_trials(self, start: int, stop: int) -> dict[str, np.ndarray]:
+        """Trials ``start .. stop - 1`` of the periodic evaluation's protocol with :attr:`candidate`: per trial
+        ``success``, ``strict_success``, ``frames_completed``, ``obj_pos_err_cm`` and ``contact_ratio``."""
         from wristmimic.evaluate.policy import RunPolicy
         from wristmimic.evaluate.protocol import load_protocol
         from wristmimic.evaluate.trials import TrialSettings, make_env, run_trials
@@ -448,17 +469,10 @@ class Runner:
         )
         if self.cfg.eval_base_seed is not None:
             settings = dataclasses.replace(settings, base_seed=self.cfg.eval_base_seed)
-        run_trials(self._eval_env, RunPolicy(current, {}), settings, 0, self.cfg.eval_trials, records.append)
-        col = {
+        run_trials(self._eval_env, RunPolicy(current, {}), settings, start, stop, records.append)
+        return {
             k: np.concatenate([r[k] for r in records])
             for k in ("success", "strict_success", "frames_completed", "obj_pos_err_cm", "contact_ratio")
-        }
-        return {
-            "eval/success_rate": float(col["success"].mean()),
-            "eval/strict_success_rate": float(col["strict_success"].mean()),
-            "eval/frames_completed": float(col["frames_completed"].mean()),
-            "eval/obj_pos_err_cm": float(np.nanmean(col["obj_pos_err_cm"])),
-            "eval/contact_ratio": float(np.nanmean(col["contact_ratio"])),
         }
 
     # -- checkpoints ---------------------------------------------------------------------------------------
@@ -510,6 +524,7 @@ class Runner:
         if self.cfg.deploy_best and deploy.get("weights") == "best":
             self.best = {k: deploy[k] for k in ("iteration", "frames", "eval_success_rate")}
             self.best["eval_strict_success_rate"] = deploy.get("eval_strict_success_rate", 0.0)  # older: none kept
+            self.best["eval_trials"] = deploy.get("eval_trials", self.cfg.eval_trials)  # older: eval_trials alone
             self.best["policy"] = {k: v.clone() for k, v in state["deploy_policy"].items()}
         with _restoring(path, "optimizer", "the Adam state of the network in the checkpoint's config"):
             self.alg.optimizer.load_state_dict(state["optimizer"])
@@ -651,6 +666,10 @@ EVAL_COLUMNS = (
     "eval/strict_success_rate",
 )
 """Columns of the periodic evaluation in ``metrics.csv`` (NaN in iterations without one)."""
+
+CONFIRM_COLUMNS = ("eval/confirm_success_rate", "eval/confirm_strict_success_rate")
+"""Columns of ``ppo.eval_confirm_trials`` (only in its runs; NaN where no candidate was confirmed): the candidate's
+rates over its periodic and confirming trials together."""
 
 
 @contextlib.contextmanager
